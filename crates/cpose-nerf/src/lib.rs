@@ -1,0 +1,7 @@
+//! cpose-nerf: the neural-field base of cpose — cameras and rays, radiance fields, volume
+//! rendering with analytic backward, image metrics and a synthetic scene renderer; tasks
+//! `planar` (2-D image alignment) and `nerf` (NeRF from noisy or unknown poses).
+//!
+//! Built on [`cpose_core`]; the event and SLAM crates build on this one.
+
+pub use cpose_core;

@@ -1,0 +1,5 @@
+//! cpose-slam: RGB-D dense tracking and mapping with a neural map, PoseNet relative to a
+//! reference frame (previous camera, world, random, intrinsic motion frame); Replica, ScanNet and
+//! TUM-RGBD readers; task `slam`.
+
+pub use cpose_nerf;
