@@ -11,6 +11,8 @@ mod real;
 mod time;
 
 pub mod pose_field;
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
 
 pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
 pub use real::Real;
