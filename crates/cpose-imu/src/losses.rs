@@ -1,0 +1,192 @@
+//! Losses that supervise a pose field with poses and IMU readings, each returning its value and
+//! accumulating its gradient with respect to the field's outputs (a cotangent [`PoseBatch`],
+//! which [`cpose_core::PoseField::backward`] takes to the parameters).
+//!
+//! All losses are means over their samples, times a weight.
+
+use cpose_core::PoseBatch;
+use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
+
+/// The sign of each component, 0 at 0 (the L1 subgradient).
+fn sign_q(q: &Quaternion<f64>) -> Quaternion<f64> {
+    Quaternion::new(sgn(q.w), sgn(q.i), sgn(q.j), sgn(q.k))
+}
+fn sgn(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+fn sign_v(v: &Vector3<f64>) -> Vector3<f64> {
+    v.map(sgn)
+}
+fn l1_q(q: &Quaternion<f64>) -> f64 {
+    q.coords.abs().sum()
+}
+
+/// Squared pose error against target poses:
+/// `L = w/n Σ_i (|q_i − s_i q̂_i|² + |p_i − p̂_i|² / scale²)`, where `s_i = ±1` aligns the
+/// target quaternion's sign with the estimate (q and −q are the same rotation) and `scale`
+/// (metres) makes translation and quaternion errors comparable.
+pub fn pose_l2(out: &PoseBatch, targets: &[Isometry3<f64>], weight: f64, scale: f64, grad: &mut PoseBatch) -> f64 {
+    let n = targets.len() as f64;
+    let inv_s2 = 1.0 / (scale * scale);
+    let mut loss = 0.0;
+    for (i, target) in targets.iter().enumerate() {
+        let q = out.rotation[i];
+        let mut qt = *target.rotation.quaternion();
+        if q.coords.dot(&qt.coords) < 0.0 {
+            qt = -qt;
+        }
+        let dq = q - qt;
+        let dp = out.translation[i] - target.translation.vector;
+        loss += dq.norm_squared() + dp.norm_squared() * inv_s2;
+        grad.rotation[i] += dq * (2.0 * weight / n);
+        grad.translation[i] += dp * (2.0 * weight * inv_s2 / n);
+    }
+    weight * loss / n
+}
+
+/// The paper's tight gyroscope coupling (§3.4, "Tight coupling"):
+/// `L = w/n Σ_i |q̇_i − ½ q_i ⊗ (0, ω_i)|₁`, with `ω_i` the measured body angular velocity
+/// (bias removed) at the field's evaluation times.
+///
+/// Gradient: with `r = q̇ − ½ q ⊗ e`, `e = (0, ω)` and `s = sign(r)`,
+/// `∂L/∂q̇ = w s / n` and `∂L/∂q = −½ w (s ⊗ e*) / n` (because `⟨s, q ⊗ e⟩ = ⟨s ⊗ e*, q⟩`).
+pub fn gyro_tight_l1(out: &PoseBatch, gyro_body: &[Vector3<f64>], weight: f64, grad: &mut PoseBatch) -> f64 {
+    let n = gyro_body.len() as f64;
+    let mut loss = 0.0;
+    for (i, w) in gyro_body.iter().enumerate() {
+        let e = Quaternion::from_imag(*w);
+        let r = out.rotation_rate[i] - out.rotation[i] * e * 0.5;
+        loss += l1_q(&r);
+        let s = sign_q(&r) * (weight / n);
+        grad.rotation_rate[i] += s;
+        grad.rotation[i] -= s * e.conjugate() * 0.5;
+    }
+    weight * loss / n
+}
+
+/// Accelerometer supervision through the second derivative (paper supplement, "Full IMU
+/// fusion"): `L = w/n Σ_i |R_iᵀ (scale · p̈_i − g_world) − f_i|₁`, with `f_i` the measured
+/// specific force (bias removed) and `scale` the metres per unit of the field's translation
+/// (the field may work in normalised coordinates). Gravity is removed in the world frame, where
+/// its direction is known, rather than estimated.
+///
+/// Gradient: with `a = scale·p̈ − g`, `f̂ = Rᵀ a = vec(q* ⊗ (0, a) ⊗ q)` for unit `q` and
+/// `s = sign(f̂ − f)`: `∂L/∂p̈ = w·scale·R s / n`, and `∂L/∂q = −2 w (0,a) ⊗ q ⊗ (0,s) / n`
+/// from the product rule on `q* ⊗ A ⊗ q` (both factors contribute `−A ⊗ q ⊗ S`, as `A* = −A`).
+pub fn accel_l1(out: &PoseBatch, accel_body: &[Vector3<f64>], gravity_world: &Vector3<f64>, scale: f64, weight: f64, grad: &mut PoseBatch) -> f64 {
+    let n = accel_body.len() as f64;
+    let mut loss = 0.0;
+    for (i, f) in accel_body.iter().enumerate() {
+        let q = out.rotation[i];
+        let a = out.lin_acc_world[i] * scale - gravity_world;
+        let qa = Quaternion::from_imag(a);
+        let predicted = (q.conjugate() * qa * q).imag();
+        let residual = predicted - f;
+        loss += residual.abs().sum();
+        let s = sign_v(&residual) * (weight / n);
+        let r = UnitQuaternion::new_normalize(q);
+        grad.lin_acc_world[i] += r * s * scale;
+        grad.rotation[i] -= qa * q * Quaternion::from_imag(s) * 2.0;
+    }
+    weight * loss / n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cpose_core::Order;
+    use nalgebra::Translation3;
+
+    /// A primal batch with arbitrary (non-degenerate) values.
+    fn primal() -> PoseBatch {
+        let mut b = PoseBatch::zeros(3, Order::Acceleration);
+        for i in 0..3 {
+            let x = i as f64;
+            b.rotation[i] = *UnitQuaternion::from_scaled_axis(Vector3::new(0.3 + x, -0.2, 0.5 * x)).quaternion();
+            b.rotation_rate[i] = Quaternion::new(0.1, -0.3 + x, 0.2, 0.05 * x);
+            b.translation[i] = Vector3::new(0.4, -x, 1.3);
+            b.lin_acc_world[i] = Vector3::new(0.7 - x, 0.2, -0.4 * x + 0.1);
+        }
+        b
+    }
+
+    /// One scalar output of a batch.
+    #[derive(Clone, Copy, Debug)]
+    enum Slot {
+        Rotation(usize, usize),
+        RotationRate(usize, usize),
+        Translation(usize, usize),
+        LinAcc(usize, usize),
+    }
+
+    fn slot(b: &mut PoseBatch, s: Slot) -> &mut f64 {
+        match s {
+            Slot::Rotation(i, k) => &mut b.rotation[i].coords[k],
+            Slot::RotationRate(i, k) => &mut b.rotation_rate[i].coords[k],
+            Slot::Translation(i, k) => &mut b.translation[i][k],
+            Slot::LinAcc(i, k) => &mut b.lin_acc_world[i][k],
+        }
+    }
+
+    /// Checks a loss's accumulated cotangent against central differences of its value, one
+    /// output component at a time (the L1 losses are smooth away from zero residuals, which
+    /// these values avoid).
+    fn check(loss: impl Fn(&PoseBatch, &mut PoseBatch) -> f64) {
+        let p = primal();
+        let mut g = PoseBatch::zeros(3, Order::Acceleration);
+        loss(&p, &mut g);
+        let value = |b: &PoseBatch| loss(b, &mut PoseBatch::zeros(3, Order::Acceleration));
+        let h = 1e-7;
+        let slots = (0..3).flat_map(|i| {
+            (0..4).flat_map(move |k| [Slot::Rotation(i, k), Slot::RotationRate(i, k)])
+                .chain((0..3).flat_map(move |k| [Slot::Translation(i, k), Slot::LinAcc(i, k)]))
+        });
+        for s in slots {
+            let (mut plus, mut minus) = (p.clone(), p.clone());
+            *slot(&mut plus, s) += h;
+            *slot(&mut minus, s) -= h;
+            let fd = (value(&plus) - value(&minus)) / (2.0 * h);
+            let an = *slot(&mut g, s);
+            assert!((fd - an).abs() < 1e-6, "{s:?}: central difference {fd} vs cotangent {an}");
+        }
+    }
+
+    #[test]
+    fn pose_loss_gradient() {
+        let targets: Vec<_> = (0..3)
+            .map(|i| Isometry3::from_parts(Translation3::new(0.1 * i as f64, 0.3, -0.2), UnitQuaternion::from_scaled_axis(Vector3::new(0.2, 0.1 * i as f64, -0.6))))
+            .collect();
+        check(|b, g| pose_l2(b, &targets, 0.7, 0.5, g));
+    }
+
+    #[test]
+    fn gyro_loss_gradient_and_zero_at_consistent_rates() {
+        let gyro = [Vector3::new(0.3, -0.1, 0.8), Vector3::new(-0.5, 0.2, 0.1), Vector3::new(0.05, 0.4, -0.3)];
+        check(|b, g| gyro_tight_l1(b, &gyro, 1.3, g));
+        // q̇ = ½ q ⊗ (0, ω) makes the loss vanish.
+        let mut b = primal();
+        for i in 0..3 {
+            b.rotation_rate[i] = b.rotation[i] * Quaternion::from_imag(gyro[i]) * 0.5;
+            assert!((b.ang_vel_body(i) - gyro[i]).norm() < 1e-12);
+        }
+        assert!(gyro_tight_l1(&b, &gyro, 1.0, &mut PoseBatch::zeros(3, Order::Velocity)) < 1e-15);
+    }
+
+    #[test]
+    fn accel_loss_gradient_and_gravity_at_rest() {
+        let accel = [Vector3::new(0.3, -0.1, 9.8), Vector3::new(-0.5, 0.2, 9.1), Vector3::new(1.05, 0.4, -0.3)];
+        let g = crate::gravity_world();
+        check(|b, gr| accel_l1(b, &accel, &g, 2.0, 0.9, gr));
+        // At rest and level, the accelerometer reads +9.81 along body z.
+        let mut b = PoseBatch::zeros(1, Order::Acceleration);
+        b.rotation[0] = Quaternion::identity();
+        let at_rest = [Vector3::new(0.0, 0.0, crate::imu::GRAVITY_M_S2)];
+        assert!(accel_l1(&b, &at_rest, &g, 1.0, 1.0, &mut PoseBatch::zeros(1, Order::Acceleration)) < 1e-12);
+    }
+}
