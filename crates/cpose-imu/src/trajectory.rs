@@ -1,0 +1,555 @@
+//! Task `trajectory`: fit pose fields to a trajectory from poses at a subset of its timestamps,
+//! optionally supervised by the gyroscope and accelerometer through the fields' time
+//! derivatives, and report the pose error at every held-out timestamp.
+//!
+//! Sources: a built-in synthetic hand-held motion (exact IMU from its analytic derivatives), a
+//! TUM trajectory file, or a EuRoC sequence (real IMU, ground-truth biases removed). Every pose
+//! field named in `[fields.NAME]` is fitted once per IMU mode; slerp/linear interpolation of the
+//! known poses is the reference (`interp`).
+//!
+//! Positions are fitted in normalised coordinates `p_n = (p − c)/s` (PoseNet's translation head
+//! is bounded by tanh); errors are reported in metres.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use cpose_core::config::Config;
+use cpose_core::eval::{self, Trajectory};
+use cpose_core::nn::{Adam, ExponentialDecay};
+use cpose_core::pose_field::sinusoid::SinusoidMotion;
+use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
+use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange, Timestamp};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::euroc::EurocSequence;
+use crate::imu::{ImuSample, gravity_world};
+use crate::losses;
+
+inventory::submit! {
+    Task {
+        name: "trajectory",
+        about: "fit pose fields to a trajectory from a subset of its poses (optionally with gyro/accel) and score held-out poses",
+        run,
+    }
+}
+
+/// The config file of the task.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Experiment {
+    #[allow(dead_code, reason = "read by the registry")]
+    task: String,
+    #[serde(default)]
+    #[allow(dead_code, reason = "decoded by the CLI")]
+    run: serde::de::IgnoredAny,
+    data: DataConfig,
+    #[serde(default)]
+    fit: FitConfig,
+    /// Pose fields by name; each table is decoded by the pose-field registry.
+    fields: BTreeMap<String, serde::de::IgnoredAny>,
+}
+
+/// Where the trajectory comes from.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+enum Source {
+    /// The built-in hand-held-like motion with exact IMU readings.
+    Synthetic,
+    /// A TUM trajectory file (`timestamp tx ty tz qx qy qz qw`); no IMU.
+    Tum,
+    /// A EuRoC sequence folder (ground truth and the real IMU).
+    Euroc,
+}
+
+/// `[data]`: the trajectory and which of its poses supervise the fit.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DataConfig {
+    /// `"synthetic"`, `"tum"` or `"euroc"`.
+    source: Source,
+    /// TUM file or EuRoC folder (relative paths are relative to the current directory).
+    path: Option<PathBuf>,
+    /// Synthetic only: length of the motion, seconds (default 10).
+    #[serde(default = "default_duration")]
+    duration_secs: f64,
+    /// Synthetic only: pose sample rate, Hz (default 100).
+    #[serde(default = "default_pose_rate")]
+    pose_rate_hz: f64,
+    /// Synthetic only: IMU sample rate, Hz (default 200).
+    #[serde(default = "default_imu_rate")]
+    imu_rate_hz: f64,
+    /// Crop: first time used, seconds after the first pose (default 0).
+    #[serde(default)]
+    start_secs: f64,
+    /// Crop: length used, seconds (default: to the end).
+    crop_secs: Option<f64>,
+    /// Keep every N-th pose as supervision; the others are held out (default 20).
+    #[serde(default = "default_known_every")]
+    known_every: usize,
+}
+
+fn default_duration() -> f64 {
+    10.0
+}
+fn default_pose_rate() -> f64 {
+    100.0
+}
+fn default_imu_rate() -> f64 {
+    200.0
+}
+fn default_known_every() -> usize {
+    20
+}
+
+/// IMU supervision of a fit, named as in `metrics.json`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
+#[serde(rename_all = "lowercase")]
+enum ImuMode {
+    /// Poses only.
+    None,
+    /// Plus the gyroscope through `q̇` (the paper's tight coupling).
+    Tight,
+    /// Plus the accelerometer through `p̈`.
+    Accel,
+    /// Plus both.
+    Combined,
+}
+
+impl ImuMode {
+    fn gyro(self) -> bool {
+        matches!(self, Self::Tight | Self::Combined)
+    }
+    fn accel(self) -> bool {
+        matches!(self, Self::Accel | Self::Combined)
+    }
+    fn order(self) -> Order {
+        if self.accel() {
+            Order::Acceleration
+        } else if self.gyro() {
+            Order::Velocity
+        } else {
+            Order::Pose
+        }
+    }
+    fn key(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Tight => "tight",
+            Self::Accel => "accel",
+            Self::Combined => "combined",
+        }
+    }
+}
+
+/// `[fit]`: optimisation shared by every field.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct FitConfig {
+    /// Adam steps per fit (scaled by `[run] iterations_scale`).
+    iterations: usize,
+    /// IMU modes to compare: `"none"`, `"tight"`, `"accel"`, `"combined"`.
+    imu: Vec<ImuMode>,
+    /// Weight of the gyroscope loss (paper: 1).
+    gyro_weight: f64,
+    /// Weight of the accelerometer loss (paper: 1).
+    accel_weight: f64,
+    /// IMU samples per step (a seeded shuffle is cycled through).
+    imu_batch: usize,
+    /// Initial learning rate of translation parameters (paper: 1e-3).
+    lr_translation: f64,
+    /// Initial learning rate of rotation parameters (paper: 2e-4).
+    lr_rotation: f64,
+    /// Initial learning rate of joint pose parameters (splines, per-frame poses).
+    lr_pose: f64,
+    /// Learning rates decay exponentially to `lr · lr_decay` at the last step (paper: 0.01).
+    lr_decay: f64,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 2000,
+            imu: vec![ImuMode::None, ImuMode::Tight],
+            gyro_weight: 1.0,
+            accel_weight: 1.0,
+            imu_batch: 256,
+            lr_translation: 1e-3,
+            lr_rotation: 2e-4,
+            lr_pose: 1e-2,
+            lr_decay: 0.01,
+        }
+    }
+}
+
+/// A trajectory cropped to the fitted range, times in seconds since its first known pose.
+struct Sequence {
+    /// Absolute time of `t = 0` (for TUM output).
+    origin_secs: f64,
+    times: Vec<f64>,
+    poses: Vec<Isometry3<f64>>,
+    /// Indices of the supervising poses (every `known_every`-th, first and last included).
+    known: Vec<usize>,
+    imu: Vec<ImuSample>,
+}
+
+fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<(f64, Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>)> {
+    let path = || -> anyhow::Result<&PathBuf> {
+        data.path.as_ref().with_context(|| format!("{}: [data] source = {:?} needs a `path`", config.path().display(), data.source))
+    };
+    Ok(match data.source {
+        Source::Synthetic => {
+            if !(data.duration_secs > 0.0 && data.pose_rate_hz > 0.0 && data.imu_rate_hz > 0.0) {
+                bail!("{}: [data] duration_secs, pose_rate_hz and imu_rate_hz must be positive", config.path().display());
+            }
+            let range = TimeRange::new(0.0, data.duration_secs).context("duration")?;
+            let motion = SinusoidMotion::<f64>::handheld(range, seed);
+            let sample = |rate: f64| -> Vec<f64> {
+                let n = (data.duration_secs * rate).floor() as usize + 1;
+                (0..n).map(|k| (k as f64 / rate).min(data.duration_secs)).collect()
+            };
+            let times = sample(data.pose_rate_hz);
+            let mut out = PoseBatch::default();
+            motion.evaluate(&times, Order::Pose, &mut out)?;
+            let poses = (0..times.len()).map(|i| out.world_from_body(i)).collect();
+            let imu_times = sample(data.imu_rate_hz);
+            motion.evaluate(&imu_times, Order::Acceleration, &mut out)?;
+            let g = gravity_world();
+            let imu = (0..imu_times.len())
+                .map(|i| {
+                    let rotation = UnitQuaternion::new_normalize(out.rotation[i]);
+                    ImuSample { t_secs: imu_times[i], gyro: out.ang_vel_body(i), accel: rotation.inverse_transform_vector(&(out.lin_acc_world[i] - g)) }
+                })
+                .collect();
+            (0.0, times, poses, imu)
+        }
+        Source::Tum => {
+            let trajectory = eval::read_tum(path()?)?;
+            let origin = trajectory.timestamps_secs()[0];
+            let times = trajectory.timestamps_secs().iter().map(|t| t - origin).collect();
+            (origin, times, trajectory.poses().to_vec(), Vec::new())
+        }
+        Source::Euroc => {
+            let seq = EurocSequence::load(path()?)?;
+            let origin = seq.ground_truth[0].stamp;
+            let times: Vec<f64> = seq.ground_truth.iter().map(|s| s.stamp.secs_since(origin)).collect();
+            let poses = seq.ground_truth.iter().map(|s| s.world_from_body).collect();
+            // Remove the ground-truth bias of the nearest state and express the readings in the
+            // body frame (EuRoC's imu0 is the body frame: T_BS = I; a lever arm is not modelled).
+            let imu_rotation = seq.body_from_imu.rotation;
+            let imu = seq
+                .imu
+                .iter()
+                .map(|s| {
+                    let t = s.stamp.secs_since(origin);
+                    let k = times.partition_point(|&x| x < t).min(times.len() - 1);
+                    let state = &seq.ground_truth[k];
+                    ImuSample { t_secs: t, gyro: imu_rotation * (s.gyro - state.gyro_bias), accel: imu_rotation * (s.accel - state.accel_bias) }
+                })
+                .collect();
+            (Timestamp::as_secs_f64(origin), times, poses, imu)
+        }
+    })
+}
+
+impl Sequence {
+    fn new(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Self> {
+        if data.known_every == 0 {
+            bail!("{}: [data] known_every must be at least 1", config.path().display());
+        }
+        let (origin, times, poses, imu) = load(config, data, seed)?;
+        let start = data.start_secs;
+        let end = data.crop_secs.map_or(f64::INFINITY, |c| start + c);
+        let keep: Vec<usize> = (0..times.len()).filter(|&i| times[i] >= start && times[i] <= end).collect();
+        // The fitted range ends at the last known pose, so no held-out pose is an extrapolation.
+        let n_known = (keep.len().saturating_sub(1)) / data.known_every + 1;
+        let keep = &keep[..((n_known - 1) * data.known_every + 1).min(keep.len())];
+        if n_known < 4 || keep.len() < 2 {
+            bail!("{}: the cropped trajectory has {} poses and {n_known} known ones; at least 4 known poses are needed", config.path().display(), keep.len());
+        }
+        let t0 = times[keep[0]];
+        let t1 = times[keep[keep.len() - 1]];
+        Ok(Self {
+            origin_secs: origin + t0,
+            times: keep.iter().map(|&i| times[i] - t0).collect(),
+            poses: keep.iter().map(|&i| poses[i]).collect(),
+            known: (0..keep.len()).step_by(data.known_every).collect(),
+            imu: imu.into_iter().filter(|s| s.t_secs >= t0 && s.t_secs <= t1).map(|s| ImuSample { t_secs: s.t_secs - t0, ..s }).collect(),
+        })
+    }
+
+    fn range(&self) -> TimeRange {
+        TimeRange { start_secs: 0.0, end_secs: *self.times.last().expect("non-empty") }
+    }
+
+    fn held_out(&self) -> Vec<usize> {
+        let mut is_known = vec![false; self.times.len()];
+        self.known.iter().for_each(|&i| is_known[i] = true);
+        (0..self.times.len()).filter(|&i| !is_known[i]).collect()
+    }
+}
+
+/// Maps positions into `[-1, 1]`-friendly coordinates: `p_n = (p − centre)/scale`.
+struct Normalisation {
+    centre: Vector3<f64>,
+    scale: f64,
+}
+
+impl Normalisation {
+    /// Centre of the bounding box of the known positions; scale 1.5× its largest half-extent.
+    fn fit(positions: impl Iterator<Item = Vector3<f64>> + Clone) -> Self {
+        let lo = positions.clone().fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(&p));
+        let hi = positions.fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(&p));
+        let centre = (lo + hi) / 2.0;
+        let scale = 1.5 * ((hi - lo) / 2.0).max().max(1e-3);
+        Self { centre, scale }
+    }
+    fn to_field(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        Isometry3::from_parts(Translation3::from((pose.translation.vector - self.centre) / self.scale), pose.rotation)
+    }
+    fn from_field(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        Isometry3::from_parts(Translation3::from(pose.translation.vector * self.scale + self.centre), pose.rotation)
+    }
+}
+
+/// Errors of one method, in the units of their names.
+#[derive(Debug, Serialize)]
+struct MethodMetrics {
+    rot_err_deg: f64,
+    rot_rmse_deg: f64,
+    trans_err_m: f64,
+    trans_rmse_m: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ang_vel_rmse_rad_s: Option<f64>,
+    held_out_poses: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    num_params: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    final_loss: Option<f64>,
+    wall_s: f64,
+}
+
+fn pose_errors(estimated: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> (f64, f64, f64, f64) {
+    let n = truth.len() as f64;
+    let (mut r1, mut r2, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0);
+    for (e, g) in estimated.iter().zip(truth) {
+        let r = e.rotation.angle_to(&g.rotation).to_degrees();
+        let t = (e.translation.vector - g.translation.vector).norm();
+        r1 += r;
+        r2 += r * r;
+        t1 += t;
+        t2 += t * t;
+    }
+    (r1 / n, (r2 / n).sqrt(), t1 / n, (t2 / n).sqrt())
+}
+
+fn rms(errors: impl Iterator<Item = f64>) -> Option<f64> {
+    let (sum, n) = errors.fold((0.0, 0usize), |(s, n), e| (s + e * e, n + 1));
+    (n > 0).then(|| (sum / n as f64).sqrt())
+}
+
+/// Slerp/linear interpolation of the known poses at time `t`, and the body angular velocity of
+/// that interpolation (constant between two known poses).
+fn interpolate(seq: &Sequence, t: f64) -> (Isometry3<f64>, Vector3<f64>) {
+    let known_times: Vec<f64> = seq.known.iter().map(|&i| seq.times[i]).collect();
+    let k = known_times.partition_point(|&x| x <= t).clamp(1, known_times.len() - 1);
+    let (a, b) = (&seq.poses[seq.known[k - 1]], &seq.poses[seq.known[k]]);
+    let (ta, tb) = (known_times[k - 1], known_times[k]);
+    let u = (t - ta) / (tb - ta);
+    let rotation = a.rotation.slerp(&b.rotation, u);
+    let translation = a.translation.vector.lerp(&b.translation.vector, u);
+    let omega = (a.rotation.inverse() * b.rotation).scaled_axis() / (tb - ta);
+    (Isometry3::from_parts(Translation3::from(translation), rotation), omega)
+}
+
+/// Everything one fit needs, allocated once.
+struct Fit<'a> {
+    seq: &'a Sequence,
+    norm: &'a Normalisation,
+    cfg: &'a FitConfig,
+    known_times: Vec<f64>,
+    known_targets: Vec<Isometry3<f64>>,
+    imu_order: Vec<usize>,
+}
+
+impl Fit<'_> {
+    /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel`; returns the last loss.
+    fn run(&self, field: &mut dyn PoseField, mode: ImuMode, iterations: usize, seed: u64, mut tick: impl FnMut()) -> anyhow::Result<f64> {
+        let mut adam = Adam::<f32>::new(field.num_params());
+        let mut grad = vec![0.0f32; field.num_params()];
+        let (mut out, mut cot) = (PoseBatch::default(), PoseBatch::default());
+        let batch = self.cfg.imu_batch.min(self.seq.imu.len()).max(1);
+        let (mut imu_times, mut gyro, mut accel) = (Vec::with_capacity(batch), Vec::with_capacity(batch), Vec::with_capacity(batch));
+        let mut imu_order = self.imu_order.clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut cursor = imu_order.len();
+        let decay = |lr: f64| ExponentialDecay { lr_start: lr, lr_end: lr * self.cfg.lr_decay, steps: iterations as u64 };
+        let (lr_t, lr_r, lr_p) = (decay(self.cfg.lr_translation), decay(self.cfg.lr_rotation), decay(self.cfg.lr_pose));
+        let g = gravity_world();
+        let mut loss = f64::NAN;
+        for it in 0..iterations {
+            grad.fill(0.0);
+            let n = self.known_times.len();
+            field.forward(&self.known_times, Order::Pose, &mut out)?;
+            cot.reset(n, Order::Pose);
+            loss = losses::pose_l2(&out, &self.known_targets, 1.0, 1.0, &mut cot);
+            field.backward(&self.known_times, &cot, &mut grad)?;
+            if mode != ImuMode::None {
+                imu_times.clear();
+                gyro.clear();
+                accel.clear();
+                for _ in 0..batch {
+                    if cursor == imu_order.len() {
+                        imu_order.shuffle(&mut rng);
+                        cursor = 0;
+                    }
+                    let s = &self.seq.imu[imu_order[cursor]];
+                    cursor += 1;
+                    imu_times.push(s.t_secs);
+                    gyro.push(s.gyro);
+                    accel.push(s.accel);
+                }
+                let order = mode.order();
+                field.forward(&imu_times, order, &mut out)?;
+                cot.reset(batch, order);
+                if mode.gyro() {
+                    loss += losses::gyro_tight_l1(&out, &gyro, self.cfg.gyro_weight, &mut cot);
+                }
+                if mode.accel() {
+                    loss += losses::accel_l1(&out, &accel, &g, self.norm.scale, self.cfg.accel_weight, &mut cot);
+                }
+                field.backward(&imu_times, &cot, &mut grad)?;
+            }
+            if !loss.is_finite() || grad.iter().any(|x| !x.is_finite()) {
+                bail!("the loss or its gradient became {loss} at iteration {it}; stopping this fit");
+            }
+            let step = it as u64;
+            adam.step_pose_field(field, &grad, |kind| match kind {
+                ParamKind::Translation => lr_t.lr(step),
+                ParamKind::Rotation => lr_r.lr(step),
+                ParamKind::Pose => lr_p.lr(step),
+            });
+            tick();
+        }
+        Ok(loss)
+    }
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let config = input.config;
+    let exp: Experiment = config.parse()?;
+    let seed = input.run.seed;
+    let seq = Sequence::new(config, &exp.data, seed)?;
+    if seq.imu.is_empty() && exp.fit.imu.iter().any(|m| *m != ImuMode::None) {
+        bail!("{}: [fit] imu = {:?} needs IMU data, but source {:?} has none; use imu = [\"none\"]", config.path().display(), exp.fit.imu, exp.data.source);
+    }
+    if exp.fields.is_empty() {
+        bail!("{}: no pose fields to fit; add a table such as [fields.posenet] with kind = \"posenet\"", config.path().display());
+    }
+    let norm = Normalisation::fit(seq.known.iter().map(|&i| seq.poses[i].translation.vector));
+    let held_out = seq.held_out();
+    let held_times: Vec<f64> = held_out.iter().map(|&i| seq.times[i]).collect();
+    let held_truth: Vec<Isometry3<f64>> = held_out.iter().map(|&i| seq.poses[i]).collect();
+    let imu_times: Vec<f64> = seq.imu.iter().map(|s| s.t_secs).collect();
+    input.run_dir.log(&format!(
+        "{} poses over {:.2} s, {} known (every {}), {} held out, {} IMU samples; positions normalised by centre {:.3?} and scale {:.3} m",
+        seq.times.len(),
+        seq.range().end_secs,
+        seq.known.len(),
+        exp.data.known_every,
+        held_out.len(),
+        seq.imu.len(),
+        norm.centre.as_slice(),
+        norm.scale
+    ))?;
+
+    let write_trajectory = |name: &str, times: &[f64], poses: Vec<Isometry3<f64>>| -> anyhow::Result<()> {
+        let absolute = times.iter().map(|t| t + seq.origin_secs).collect();
+        let trajectory = Trajectory::new(absolute, poses)?;
+        eval::write_tum(input.run_dir.path().join(name), &trajectory)?;
+        Ok(())
+    };
+    write_trajectory("gt.txt", &seq.times, seq.poses.clone())?;
+    let known_times: Vec<f64> = seq.known.iter().map(|&i| seq.times[i]).collect();
+    write_trajectory("known.txt", &known_times, seq.known.iter().map(|&i| seq.poses[i]).collect())?;
+
+    let mut metrics: BTreeMap<&str, BTreeMap<String, MethodMetrics>> = BTreeMap::new();
+    // Reference: interpolation of the known poses.
+    let started = Instant::now();
+    let interp: Vec<Isometry3<f64>> = held_times.iter().map(|&t| interpolate(&seq, t).0).collect();
+    let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&interp, &held_truth);
+    let ang_vel = rms(seq.imu.iter().map(|s| (interpolate(&seq, s.t_secs).1 - s.gyro).norm()));
+    metrics.entry(ImuMode::None.key()).or_default().insert(
+        "interp".into(),
+        MethodMetrics { rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m, ang_vel_rmse_rad_s: ang_vel, held_out_poses: held_out.len(), num_params: None, final_loss: None, wall_s: started.elapsed().as_secs_f64() },
+    );
+    write_trajectory("est_interp.txt", &seq.times, seq.times.iter().map(|&t| interpolate(&seq, t).0).collect())?;
+
+    let fit = Fit {
+        seq: &seq,
+        norm: &norm,
+        cfg: &exp.fit,
+        known_times: known_times.clone(),
+        known_targets: seq.known.iter().map(|&i| norm.to_field(&seq.poses[i])).collect(),
+        imu_order: (0..seq.imu.len()).collect(),
+    };
+    let iterations = input.run.iterations(exp.fit.iterations);
+    let mut modes = exp.fit.imu.clone();
+    modes.dedup();
+    let progress = input.progress((iterations * modes.len() * exp.fields.len()) as u64, "fitting");
+    let ctx = FieldContext { time_range: seq.range(), frame_times_secs: known_times.clone(), seed };
+    for &mode in &modes {
+        for name in exp.fields.keys() {
+            let section = config.section(&format!("fields.{name}"));
+            let mut field = build_pose_field(&section, &ctx)?;
+            let started = Instant::now();
+            let final_loss = fit
+                .run(field.as_mut(), mode, iterations, seed, || progress.inc(1))
+                .with_context(|| format!("fitting [fields.{name}] with imu = {:?}", mode.key()))?;
+            let wall_s = started.elapsed().as_secs_f64();
+            let mut out = PoseBatch::default();
+            field.evaluate(&seq.times, Order::Pose, &mut out)?;
+            let all: Vec<Isometry3<f64>> = (0..seq.times.len()).map(|i| norm.from_field(&out.world_from_body(i))).collect();
+            let estimated: Vec<Isometry3<f64>> = held_out.iter().map(|&i| all[i]).collect();
+            let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&estimated, &held_truth);
+            let ang_vel_rmse_rad_s = if imu_times.is_empty() {
+                None
+            } else {
+                field.evaluate(&imu_times, Order::Velocity, &mut out)?;
+                rms(seq.imu.iter().enumerate().map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
+            };
+            write_trajectory(&format!("est_{}_{name}.txt", mode.key()), &seq.times, all)?;
+            input.run_dir.log(&format!(
+                "imu={:<8} {name:<12} rot {rot_err_deg:8.4}° trans {:8.3} cm  ω-rmse {}  loss {final_loss:.3e}  {wall_s:.1} s",
+                mode.key(),
+                trans_err_m * 100.0,
+                ang_vel_rmse_rad_s.map_or("-".into(), |w| format!("{w:.4} rad/s")),
+            ))?;
+            metrics.entry(mode.key()).or_default().insert(
+                name.clone(),
+                MethodMetrics { rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m, ang_vel_rmse_rad_s, held_out_poses: held_out.len(), num_params: Some(field.num_params()), final_loss: Some(final_loss), wall_s },
+            );
+        }
+    }
+    progress.finish();
+    input.run_dir.write_json("metrics.json", &metrics)?;
+    input.run_dir.log(&summary_table(&metrics))?;
+    Ok(())
+}
+
+/// The held-out errors as a text table, one row per (IMU mode, method).
+fn summary_table(metrics: &BTreeMap<&str, BTreeMap<String, MethodMetrics>>) -> String {
+    let mut s = format!("\n{:<10} {:<12} {:>12} {:>12} {:>14}\n", "imu", "method", "rot [deg]", "trans [cm]", "ω rmse [rad/s]");
+    for (mode, methods) in metrics {
+        for (name, m) in methods {
+            let w = m.ang_vel_rmse_rad_s.map_or("-".to_owned(), |w| format!("{w:.4}"));
+            s.push_str(&format!("{mode:<10} {name:<12} {:>12.4} {:>12.3} {w:>14}\n", m.rot_err_deg, m.trans_err_m * 100.0));
+        }
+    }
+    s
+}
