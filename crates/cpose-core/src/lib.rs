@@ -10,6 +10,8 @@
 mod real;
 mod time;
 
+pub mod eval;
+pub mod fs;
 pub mod pose_field;
 
 pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
