@@ -1,16 +1,20 @@
 //! Association of two trajectories by nearest timestamp, as evo's
-//! `sync.associate_trajectories` / `sync.matching_time_indices`.
+//! `sync.associate_trajectories` with `SyncMethod.nearest_time` / `sync.matching_time_indices`
+//! (evo 1.38.1, sorted-timestamps path).
 //!
-//! evo's rule, reproduced exactly:
-//! - the **shorter** trajectory drives (on equal lengths, the second one drives);
-//! - for each of its stamps `s_i`, in order, take the index `j` of the other trajectory minimising
-//!   `|(l_j + offset) − s_i|` (the first such index on ties, as `np.argmin`), where `offset` is the
-//!   time offset of the second trajectory when the second is the longer one, and its negation
-//!   otherwise;
-//! - keep the pair if that difference is `≤ max_diff`.
+//! evo's rule, reproduced operation by operation:
+//! - the **shorter** trajectory drives (on equal lengths, the second one drives); the other one's
+//!   stamps are shifted by `offset` (the second trajectory's time offset when the second is the
+//!   longer one, its negation otherwise): `l_j ← l_j + offset`;
+//! - a driving stamp `s` outside `[l_0 − max_diff, l_last + max_diff]` is skipped;
+//! - `j` = first index with `l_j > s` (`np.searchsorted(…, side="right")`), clamped to the last
+//!   index; `ub = l_j − s`, `lb = s − l_{j−1}` (∞ for `j = 0`);
+//! - take `j` if `ub ≤ max_diff` and `ub < lb`, else `j − 1` if `lb ≤ max_diff` and `lb ≤ ub`
+//!   (ties go to the earlier stamp), else nothing.
 //!
-//! An index of the longer trajectory may therefore be matched twice. evo searches linearly; we
-//! binary-search the (strictly increasing) stamps, and pick the same index.
+//! An index of the longer trajectory may therefore be matched twice. Older evo releases searched
+//! linearly for the first minimiser of `|l_j − s|`; that gives the same pairs except, possibly,
+//! for differences within an ulp of `max_diff` (a unit test checks the two agree).
 
 use super::EvalError;
 use super::trajectory::Trajectory;
@@ -105,7 +109,7 @@ pub fn associate_with_offset(
 }
 
 /// evo's `matching_time_indices(short, long, max_diff, offset)`: `(index in short, index in long)`.
-/// `long` must be sorted (non-decreasing).
+/// `long` must be sorted (strictly increasing, as a [`Trajectory`]'s stamps are).
 fn matching_indices(
     short: &[f64],
     long: &[f64],
@@ -113,33 +117,25 @@ fn matching_indices(
     offset: f64,
 ) -> Vec<(usize, usize)> {
     let mut pairs = Vec::new();
-    if long.is_empty() {
+    let shifted: Vec<f64> = long.iter().map(|l| l + offset).collect();
+    let (Some(&first), Some(&last)) = (shifted.first(), shifted.last()) else {
         return pairs;
-    }
+    };
     for (i, &s) in short.iter().enumerate() {
-        // The same floating-point operations as evo: (l + offset) − s, then abs.
-        let diff = |j: usize| (long[j] + offset) - s;
-        // diff(j) is non-decreasing in j (rounding is monotone), so |diff| is smallest either at
-        // the first index with diff ≥ 0 or at the last value with diff < 0, taken at its first
-        // occurrence (np.argmin returns the first minimum).
-        let above = partition_point(long.len(), |j| diff(j) < 0.0);
-        let mut best: Option<(usize, f64)> = None;
-        if above > 0 {
-            let below_value = diff(above - 1);
-            let first_of_value = partition_point(long.len(), |j| diff(j) < below_value);
-            best = Some((first_of_value, below_value.abs()));
+        if s < first - max_diff || s > last + max_diff {
+            continue;
         }
-        if above < long.len() {
-            let d = diff(above).abs();
-            // Strictly smaller only: on a tie the lower index wins.
-            if best.is_none_or(|(_, b)| d < b) {
-                best = Some((above, d));
-            }
-        }
-        if let Some((j, d)) = best
-            && d <= max_diff
-        {
+        let j = partition_point(shifted.len(), |j| shifted[j] <= s).min(shifted.len() - 1);
+        let diff_ub = shifted[j] - s;
+        let diff_lb = if j > 0 {
+            s - shifted[j - 1]
+        } else {
+            f64::INFINITY
+        };
+        if diff_ub <= max_diff && diff_ub < diff_lb {
             pairs.push((i, j));
+        } else if diff_lb <= max_diff && diff_lb <= diff_ub {
+            pairs.push((i, j - 1));
         }
     }
     pairs
@@ -167,7 +163,7 @@ mod tests {
 
     use super::*;
 
-    /// evo's linear search, literally: argmin (first minimum) of |(l + offset) − s|.
+    /// Older evo's linear search: argmin (first minimum) of |(l + offset) − s|.
     fn brute_force(short: &[f64], long: &[f64], max_diff: f64, offset: f64) -> Vec<(usize, usize)> {
         let mut pairs = Vec::new();
         for (i, &s) in short.iter().enumerate() {
@@ -190,7 +186,7 @@ mod tests {
     }
 
     #[test]
-    fn binary_search_equals_evo_linear_search() {
+    fn binary_search_equals_older_evo_linear_search() {
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         for case in 0..200 {
             let mut a: Vec<f64> = (0..rng.random_range(1..40))
