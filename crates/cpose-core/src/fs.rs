@@ -1,29 +1,69 @@
-//! File-system helpers: atomic writes and the shared test-data folder.
+//! File-system helpers: atomic writes, and the location of the shared real-data folder.
 
-use std::io::Write;
+use std::ffi::OsString;
+use std::fs::{self, File};
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, flushed, then
-/// renamed over `path`, so readers never see a half-written file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let file_name = path.file_name().ok_or_else(|| std::io::Error::other(format!("not a file path: {}", path.display())))?;
-    let mut tmp_name = file_name.to_os_string();
-    tmp_name.push(".tmp");
-    let tmp = path.with_file_name(tmp_name);
-    {
-        let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
+/// Writes `bytes` to `path` atomically: the bytes go to `<path>.tmp` in the same folder, are
+/// flushed to disk, and the temporary file is then renamed over `path`. A reader sees either the
+/// old file or the complete new one, never a partial write. On error the temporary file is
+/// removed (best effort) and the error returned.
+pub fn write_atomic(path: impl AsRef<Path>, bytes: impl AsRef<[u8]>) -> io::Result<()> {
+    let path = path.as_ref();
+    let tmp = tmp_path(path);
+    let result = (|| {
+        let mut file = File::create(&tmp)?;
+        file.write_all(bytes.as_ref())?;
         file.sync_all()?;
+        drop(file);
+        fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        // Best effort: the original error is the one worth reporting.
+        let _ = fs::remove_file(&tmp);
     }
-    std::fs::rename(&tmp, path)
+    result
 }
 
-/// The folder of small real datasets used by tests and benchmarks: `$CPOSE_DATA_DIR` if set,
-/// else `../shared/data` beside the workspace. `None` when the folder does not exist.
+/// `<path>.tmp`: the file name with `.tmp` appended (so `a.txt` becomes `a.txt.tmp`).
+fn tmp_path(path: &Path) -> PathBuf {
+    let mut name: OsString = path.file_name().map(OsString::from).unwrap_or_default();
+    name.push(".tmp");
+    path.with_file_name(name)
+}
+
+/// The folder of shared real data for tests and benchmarks (see DESIGN.md, "Tests that need real
+/// data"): the environment variable `CPOSE_DATA_DIR` if set, else `<workspace root>/../shared/data`,
+/// where the workspace root is two levels above this crate's manifest. `None` when that folder does
+/// not exist (a user's machine); callers then skip, saying so.
 pub fn shared_data_dir() -> Option<PathBuf> {
     let dir = match std::env::var_os("CPOSE_DATA_DIR") {
-        Some(d) => PathBuf::from(d),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
+        Some(dir) if !dir.is_empty() => PathBuf::from(dir),
+        _ => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
     };
     dir.is_dir().then_some(dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn write_atomic_replaces_file_and_leaves_no_temporary() {
+        let dir = std::env::temp_dir().join(format!("cpose-fs-test-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.txt");
+        write_atomic(&path, b"first").unwrap();
+        write_atomic(&path, "second").unwrap();
+        assert_eq!(fs::read_to_string(&path).unwrap(), "second");
+        assert!(!dir.join("out.txt.tmp").exists());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn write_atomic_into_missing_folder_is_an_error() {
+        let path = std::env::temp_dir().join("cpose-no-such-folder-4711/x.txt");
+        assert!(write_atomic(&path, b"x").is_err());
+    }
 }

@@ -10,6 +10,7 @@
 mod real;
 mod time;
 
+pub mod eval;
 pub mod fs;
 pub mod pose_field;
 #[cfg(any(test, feature = "testing"))]

@@ -1,0 +1,261 @@
+//! A timed sequence of poses, and the errors of building or reading one.
+
+use std::path::PathBuf;
+
+use nalgebra::Isometry3;
+
+/// Everything that can go wrong when building, reading or writing a [`Trajectory`].
+///
+/// File errors name the 1-based line and, last, the file.
+#[derive(Debug, thiserror::Error)]
+pub enum TrajectoryError {
+    /// The file could not be opened or read (missing, a folder, not UTF-8, …).
+    #[error("cannot read trajectory file ({source}): {}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The file could not be written.
+    #[error("cannot write trajectory file ({source}): {}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// No pose line at all (only comments or blank lines, or nothing).
+    #[error("expected at least one pose line `timestamp tx ty tz qx qy qz qw`, got none: {}", path.display())]
+    Empty {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A line with the wrong number of values.
+    #[error("line {line}: expected 8 columns `timestamp tx ty tz qx qy qz qw`, got {got}: {}", path.display())]
+    ColumnCount {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// Number of values found.
+        got: usize,
+    },
+    /// A value that does not parse as a number.
+    #[error("line {line}: expected a number for `{column}`, got `{text}`: {}", path.display())]
+    NotANumber {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// Column name (`timestamp`, `tx`, …, `qw`).
+        column: &'static str,
+        /// The offending text.
+        text: String,
+    },
+    /// A value that parses but is NaN or infinite.
+    #[error("line {line}: expected a finite number for `{column}`, got `{text}`: {}", path.display())]
+    NotFinite {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// Column name.
+        column: &'static str,
+        /// The offending text.
+        text: String,
+    },
+    /// A quaternion whose norm is (numerically) zero, so it names no rotation.
+    #[error("line {line}: expected a non-zero quaternion `qx qy qz qw`, got norm {norm:e}: {}", path.display())]
+    ZeroQuaternion {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// Its Euclidean norm.
+        norm: f64,
+    },
+    /// A timestamp equal to an earlier one.
+    #[error("line {line}: expected a unique timestamp, got {timestamp} again (first on line {first_line}): {}", path.display())]
+    DuplicateTimestamp {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number of the repeat.
+        line: usize,
+        /// 1-based line number of the first occurrence.
+        first_line: usize,
+        /// The repeated timestamp, seconds.
+        timestamp: f64,
+    },
+    /// A timestamp smaller than the one before it.
+    #[error("line {line}: expected increasing timestamps, got {timestamp} after {previous}: {}", path.display())]
+    UnsortedTimestamp {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// The previous timestamp, seconds.
+        previous: f64,
+        /// This line's timestamp, seconds.
+        timestamp: f64,
+    },
+    /// [`Trajectory::new`] got different numbers of timestamps and poses.
+    #[error("expected as many poses as timestamps ({timestamps}), got {poses}")]
+    LengthMismatch {
+        /// Number of timestamps.
+        timestamps: usize,
+        /// Number of poses.
+        poses: usize,
+    },
+    /// [`Trajectory::new`] got a NaN or infinite timestamp.
+    #[error("pose {index}: expected a finite timestamp, got {timestamp}")]
+    NonFiniteTimestamp {
+        /// 0-based index.
+        index: usize,
+        /// The timestamp.
+        timestamp: f64,
+    },
+    /// [`Trajectory::new`] got timestamps that do not strictly increase.
+    #[error(
+        "pose {index}: expected strictly increasing timestamps, got {timestamp} after {previous}"
+    )]
+    NotIncreasing {
+        /// 0-based index.
+        index: usize,
+        /// The previous timestamp.
+        previous: f64,
+        /// This timestamp.
+        timestamp: f64,
+    },
+    /// [`Trajectory::new`] got a pose with a NaN or infinite entry.
+    #[error("pose {index}: expected finite translation and rotation, got {pose}")]
+    NonFinitePose {
+        /// 0-based index.
+        index: usize,
+        /// The pose, printed.
+        pose: String,
+    },
+}
+
+/// A trajectory: poses `world_from_body` (for a camera, `world_from_cam`) at timestamps in
+/// seconds, as read from the file (e.g. Unix time in a TUM file).
+///
+/// Invariants, checked by [`Trajectory::new`]: as many poses as timestamps, timestamps finite and
+/// strictly increasing, poses finite. It may be empty.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    timestamps_secs: Vec<f64>,
+    world_from_body: Vec<Isometry3<f64>>,
+}
+
+impl Trajectory {
+    /// A trajectory from timestamps (seconds) and poses `world_from_body`, checking the
+    /// invariants listed on the type.
+    pub fn new(
+        timestamps_secs: Vec<f64>,
+        world_from_body: Vec<Isometry3<f64>>,
+    ) -> Result<Self, TrajectoryError> {
+        if timestamps_secs.len() != world_from_body.len() {
+            return Err(TrajectoryError::LengthMismatch {
+                timestamps: timestamps_secs.len(),
+                poses: world_from_body.len(),
+            });
+        }
+        for (index, &timestamp) in timestamps_secs.iter().enumerate() {
+            if !timestamp.is_finite() {
+                return Err(TrajectoryError::NonFiniteTimestamp { index, timestamp });
+            }
+            if index > 0 && timestamp <= timestamps_secs[index - 1] {
+                return Err(TrajectoryError::NotIncreasing {
+                    index,
+                    previous: timestamps_secs[index - 1],
+                    timestamp,
+                });
+            }
+        }
+        for (index, pose) in world_from_body.iter().enumerate() {
+            let finite = pose.translation.vector.iter().all(|v| v.is_finite())
+                && pose.rotation.coords.iter().all(|v| v.is_finite());
+            if !finite {
+                return Err(TrajectoryError::NonFinitePose {
+                    index,
+                    pose: format!("{pose}"),
+                });
+            }
+        }
+        Ok(Self {
+            timestamps_secs,
+            world_from_body,
+        })
+    }
+
+    /// Number of poses.
+    pub fn len(&self) -> usize {
+        self.timestamps_secs.len()
+    }
+
+    /// Whether there are no poses.
+    pub fn is_empty(&self) -> bool {
+        self.timestamps_secs.is_empty()
+    }
+
+    /// Timestamps in seconds, strictly increasing.
+    pub fn timestamps_secs(&self) -> &[f64] {
+        &self.timestamps_secs
+    }
+
+    /// Poses `world_from_body`, one per timestamp.
+    pub fn poses(&self) -> &[Isometry3<f64>] {
+        &self.world_from_body
+    }
+
+    /// Positions of the body in the world (the translation parts of the poses).
+    pub fn positions(&self) -> Vec<nalgebra::Vector3<f64>> {
+        self.world_from_body
+            .iter()
+            .map(|p| p.translation.vector)
+            .collect()
+    }
+
+    /// Iterates over `(timestamp_secs, world_from_body)`.
+    pub fn iter(&self) -> impl Iterator<Item = (f64, &Isometry3<f64>)> {
+        self.timestamps_secs
+            .iter()
+            .copied()
+            .zip(self.world_from_body.iter())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn new_checks_lengths_order_and_finiteness() {
+        let id = Isometry3::identity();
+        assert!(matches!(
+            Trajectory::new(vec![0.0, 1.0], vec![id]),
+            Err(TrajectoryError::LengthMismatch {
+                timestamps: 2,
+                poses: 1
+            })
+        ));
+        assert!(matches!(
+            Trajectory::new(vec![1.0, 1.0], vec![id, id]),
+            Err(TrajectoryError::NotIncreasing { index: 1, .. })
+        ));
+        assert!(matches!(
+            Trajectory::new(vec![f64::NAN], vec![id]),
+            Err(TrajectoryError::NonFiniteTimestamp { index: 0, .. })
+        ));
+        let bad = Isometry3::translation(f64::INFINITY, 0.0, 0.0);
+        assert!(matches!(
+            Trajectory::new(vec![0.0], vec![bad]),
+            Err(TrajectoryError::NonFinitePose { index: 0, .. })
+        ));
+        let t = Trajectory::new(vec![0.0, 0.5], vec![id, id]).unwrap();
+        assert_eq!(t.len(), 2);
+        assert!(!t.is_empty());
+        assert_eq!(t.iter().count(), 2);
+    }
+}

@@ -1,0 +1,289 @@
+//! Agreement of `cpose_core::eval` with evo on real data (TUM RGB-D fr1_xyz: mocap ground truth
+//! and an RGBD-SLAM estimate with different timestamps), plus invariants on the same files.
+//!
+//! Needs the shared data folder (`CPOSE_DATA_DIR`, else `../shared/data` beside the workspace);
+//! the evo tests also need `evo_ape`/`evo_rpe` on PATH (`pip install evo==1.38.1`). Without the
+//! data the tests print one line and pass; without evo they print one line and pass, unless the
+//! environment variable `CI` is set, where a missing evo is a failure.
+
+// A test crate: its helpers panic on failure and print the numbers and skip notices.
+#![allow(clippy::unwrap_used, clippy::print_stdout)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use cpose_core::eval::{
+    Alignment, DEFAULT_MAX_DIFF_SECS, Trajectory, align_poses, ape_rotation_angle, associate,
+    barf_pose_errors, error_stats, read_tum, rpe, write_tum,
+};
+
+/// The fr1_xyz files `(ground truth, estimate)`, or `None` (after saying so) when the shared data
+/// folder is missing.
+fn tum_files(test: &str) -> Option<(PathBuf, PathBuf)> {
+    let Some(dir) = cpose_core::fs::shared_data_dir() else {
+        println!("{test}: skipped, shared data folder not found (set CPOSE_DATA_DIR)");
+        return None;
+    };
+    let dir = dir.join("tum/fr1_xyz");
+    Some((
+        dir.join("groundtruth.txt"),
+        dir.join("rgbdslam_estimate.txt"),
+    ))
+}
+
+/// A unique path in the system temp folder.
+fn temp_path(name: &str) -> PathBuf {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    std::env::temp_dir().join(format!("cpose-eval-evo-{}-{n}-{name}", std::process::id()))
+}
+
+/// Runs an evo command (`evo_ape` or `evo_rpe`) with `args` and `--save_results` to a temporary
+/// zip, and returns its `stats.json` statistics at full precision (evo prints only 6 decimals).
+/// `None` (after saying so) when the command is not installed and `CI` is unset.
+fn run_evo(test: &str, program: &str, args: &[&str]) -> Option<serde_json::Value> {
+    let zip = temp_path("results.zip");
+    let output = Command::new(program)
+        .args(args)
+        .arg("--no_warnings")
+        .arg("--save_results")
+        .arg(&zip)
+        .output();
+    let output = match output {
+        Ok(output) => output,
+        Err(err) if err.kind() == std::io::ErrorKind::NotFound => {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "{program} not found on PATH; CI must install evo (pip install evo==1.38.1)"
+            );
+            println!("{test}: skipped, {program} not on PATH (pip install evo==1.38.1)");
+            return None;
+        }
+        Err(err) => panic!("cannot run {program}: {err}"),
+    };
+    assert!(
+        output.status.success(),
+        "{program} {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let bytes = std::fs::read(&zip).unwrap();
+    std::fs::remove_file(&zip).unwrap();
+    let stats = stored_zip_entry(&bytes, "stats.json")
+        .unwrap_or_else(|| panic!("no stored stats.json in the results zip of {program}"));
+    Some(serde_json::from_slice(stats).unwrap())
+}
+
+/// The bytes of entry `name` of a zip archive written without compression (Python's
+/// `zipfile.ZipFile.writestr` default, `ZIP_STORED`, which evo's `save_res_file` uses). Walks the
+/// local file headers: signature `PK\x03\x04`, method at byte 8, compressed size at 18, name
+/// length at 26, extra length at 28, then the name, the extra field and the data.
+fn stored_zip_entry<'a>(zip: &'a [u8], name: &str) -> Option<&'a [u8]> {
+    let u16_at = |i: usize| u16::from_le_bytes([zip[i], zip[i + 1]]) as usize;
+    let u32_at =
+        |i: usize| u32::from_le_bytes([zip[i], zip[i + 1], zip[i + 2], zip[i + 3]]) as usize;
+    let mut pos = 0;
+    while pos + 30 <= zip.len() && zip[pos..pos + 4] == *b"PK\x03\x04" {
+        let method = u16_at(pos + 8);
+        let size = u32_at(pos + 18);
+        let name_len = u16_at(pos + 26);
+        let extra_len = u16_at(pos + 28);
+        let entry_name = &zip[pos + 30..pos + 30 + name_len];
+        let data = pos + 30 + name_len + extra_len;
+        if entry_name == name.as_bytes() {
+            assert_eq!(method, 0, "{name} is compressed; expected a stored entry");
+            return Some(&zip[data..data + size]);
+        }
+        pos = data + size;
+    }
+    None
+}
+
+fn stat(stats: &serde_json::Value, key: &str) -> f64 {
+    stats[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no `{key}` in evo stats {stats}"))
+}
+
+/// Relative difference `|ours − evo| / |evo|`.
+fn rel_diff(ours: f64, evo: f64) -> f64 {
+    (ours - evo).abs() / evo.abs().max(1e-300)
+}
+
+fn assert_rel(ours: f64, evo: f64, what: &str) {
+    let rel = rel_diff(ours, evo);
+    assert!(
+        rel < 1e-6,
+        "{what}: ours {ours:.12}, evo {evo:.12}, relative difference {rel:e}"
+    );
+}
+
+fn load(gt: &Path, est: &Path) -> (Trajectory, Trajectory) {
+    (read_tum(gt).unwrap(), read_tum(est).unwrap())
+}
+
+#[test]
+fn eval_ate_matches_evo_ape_on_tum_fr1_xyz() {
+    let test = "eval_ate_matches_evo_ape_on_tum_fr1_xyz";
+    let Some((gt_path, est_path)) = tum_files(test) else {
+        return;
+    };
+    let (gt, est) = load(&gt_path, &est_path);
+    let (gt_s, est_s) = (gt_path.to_str().unwrap(), est_path.to_str().unwrap());
+    for (align, flags) in [
+        (Alignment::None, &[][..]),
+        (Alignment::Se3, &["-a"][..]),
+        (Alignment::Sim3, &["-as"][..]),
+    ] {
+        let mut args = vec!["tum", gt_s, est_s];
+        args.extend_from_slice(flags);
+        let Some(stats) = run_evo(test, "evo_ape", &args) else {
+            return;
+        };
+        let ours = cpose_core::eval::ate(&gt, &est, align, DEFAULT_MAX_DIFF_SECS).unwrap();
+        println!(
+            "APE translation, {align}: evo rmse {:.15} m, ours {:.15} m, relative difference {:.1e} ({} pairs)",
+            stat(&stats, "rmse"),
+            ours.rmse_m,
+            rel_diff(ours.rmse_m, stat(&stats, "rmse")),
+            ours.num_matched
+        );
+        assert_rel(ours.rmse_m, stat(&stats, "rmse"), &format!("{align} rmse"));
+        assert_rel(ours.mean_m, stat(&stats, "mean"), &format!("{align} mean"));
+        assert_rel(
+            ours.median_m,
+            stat(&stats, "median"),
+            &format!("{align} median"),
+        );
+        assert_rel(ours.std_m, stat(&stats, "std"), &format!("{align} std"));
+        assert_rel(ours.min_m, stat(&stats, "min"), &format!("{align} min"));
+        assert_rel(ours.max_m, stat(&stats, "max"), &format!("{align} max"));
+        assert_rel(ours.sse_m2, stat(&stats, "sse"), &format!("{align} sse"));
+    }
+}
+
+#[test]
+fn eval_rotation_ape_and_rpe_match_evo_on_tum_fr1_xyz() {
+    let test = "eval_rotation_ape_and_rpe_match_evo_on_tum_fr1_xyz";
+    let Some((gt_path, est_path)) = tum_files(test) else {
+        return;
+    };
+    let (gt, est) = load(&gt_path, &est_path);
+    let (gt_s, est_s) = (gt_path.to_str().unwrap(), est_path.to_str().unwrap());
+    let (reference, estimate) = associate(&gt, &est, DEFAULT_MAX_DIFF_SECS)
+        .unwrap()
+        .poses(&gt, &est);
+
+    // Rotation-angle APE after SE(3) alignment: checks that orientations are aligned as evo does.
+    let Some(stats) = run_evo(
+        test,
+        "evo_ape",
+        &["tum", gt_s, est_s, "-a", "-r", "angle_deg"],
+    ) else {
+        return;
+    };
+    let (_, aligned) = align_poses(&reference, &estimate, Alignment::Se3).unwrap();
+    let deg: Vec<f64> = ape_rotation_angle(&reference, &aligned)
+        .unwrap()
+        .iter()
+        .map(|a| a.to_degrees())
+        .collect();
+    let ours = error_stats(&deg).unwrap();
+    println!(
+        "APE angle, se3: evo rmse {:.15} deg, ours {:.15} deg, relative difference {:.1e}",
+        stat(&stats, "rmse"),
+        ours.rmse,
+        rel_diff(ours.rmse, stat(&stats, "rmse"))
+    );
+    assert_rel(ours.rmse, stat(&stats, "rmse"), "APE angle rmse");
+    assert_rel(ours.max, stat(&stats, "max"), "APE angle max");
+
+    // RPE, delta 1 frame, translation and rotation angle.
+    let rel = rpe(&reference, &estimate, 1).unwrap();
+    let Some(stats) = run_evo(test, "evo_rpe", &["tum", gt_s, est_s]) else {
+        return;
+    };
+    let ours = error_stats(&rel.translation).unwrap();
+    println!(
+        "RPE translation: evo rmse {:.15} m, ours {:.15} m, relative difference {:.1e}",
+        stat(&stats, "rmse"),
+        ours.rmse,
+        rel_diff(ours.rmse, stat(&stats, "rmse"))
+    );
+    assert_rel(ours.rmse, stat(&stats, "rmse"), "RPE translation rmse");
+    assert_rel(
+        ours.median,
+        stat(&stats, "median"),
+        "RPE translation median",
+    );
+    let Some(stats) = run_evo(test, "evo_rpe", &["tum", gt_s, est_s, "-r", "angle_deg"]) else {
+        return;
+    };
+    let deg: Vec<f64> = rel
+        .rotation_angle_rad
+        .iter()
+        .map(|a| a.to_degrees())
+        .collect();
+    let ours = error_stats(&deg).unwrap();
+    println!(
+        "RPE angle: evo rmse {:.15} deg, ours {:.15} deg, relative difference {:.1e}",
+        stat(&stats, "rmse"),
+        ours.rmse,
+        rel_diff(ours.rmse, stat(&stats, "rmse"))
+    );
+    assert_rel(ours.rmse, stat(&stats, "rmse"), "RPE angle rmse");
+    assert_rel(ours.mean, stat(&stats, "mean"), "RPE angle mean");
+}
+
+#[test]
+fn eval_invariants_on_tum_fr1_xyz() {
+    let Some((gt_path, est_path)) = tum_files("eval_invariants_on_tum_fr1_xyz") else {
+        return;
+    };
+    let (gt, est) = load(&gt_path, &est_path);
+    assert_eq!(gt.len(), 3000);
+    assert_eq!(est.len(), 788);
+
+    let none = cpose_core::eval::ate(&gt, &est, Alignment::None, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let se3 = cpose_core::eval::ate(&gt, &est, Alignment::Se3, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let sim3 = cpose_core::eval::ate(&gt, &est, Alignment::Sim3, DEFAULT_MAX_DIFF_SECS).unwrap();
+    // Umeyama minimises the SSE over a growing set of transforms.
+    assert!(se3.sse_m2 <= none.sse_m2 && sim3.sse_m2 <= se3.sse_m2 * (1.0 + 1e-12));
+    assert!(
+        se3.rmse_m < 0.05,
+        "an RGBD-SLAM estimate of fr1_xyz is good to a few cm"
+    );
+    assert_eq!(se3.transform.scale, 1.0);
+    assert!((sim3.transform.scale - 1.0).abs() < 0.1);
+    // Every estimated pose lies within 10 ms of a 100 Hz ground-truth pose.
+    assert!(none.num_matched <= est.len() && none.num_matched > est.len() * 9 / 10);
+    // Association is symmetric in the pairs it finds.
+    let forward = associate(&gt, &est, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let backward = associate(&est, &gt, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let flipped: Vec<_> = backward.pairs.iter().map(|&(a, b)| (b, a)).collect();
+    assert_eq!(forward.pairs, flipped);
+    // BARF errors on the associated poses are finite and small for a good estimate.
+    let (reference, estimate) = forward.poses(&gt, &est);
+    let barf = barf_pose_errors(&reference, &estimate).unwrap();
+    assert!(
+        barf.rot_err_deg.is_finite() && barf.rot_err_deg < 10.0,
+        "{}",
+        barf.rot_err_deg
+    );
+    assert!(
+        barf.trans_err.is_finite() && barf.trans_err < 0.2,
+        "{}",
+        barf.trans_err
+    );
+    // Writing and reading back the real file loses nothing.
+    let copy = temp_path("groundtruth.txt");
+    write_tum(&copy, &gt).unwrap();
+    let back = read_tum(&copy).unwrap();
+    std::fs::remove_file(&copy).unwrap();
+    assert_eq!(back.timestamps_secs(), gt.timestamps_secs());
+    for (a, b) in back.poses().iter().zip(gt.poses()) {
+        assert_eq!(a.translation, b.translation);
+        assert!(a.rotation.angle_to(&b.rotation) < 1e-15);
+    }
+}
