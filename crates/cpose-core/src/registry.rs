@@ -180,20 +180,21 @@ pub fn build_pose_field(
 /// Checks that no two tasks and no two pose fields share a name (call at start-up and in a
 /// test of every binary).
 pub fn check_unique() -> Result<(), RegistryError> {
-    fn first_duplicate(
-        what: &'static str,
-        names: impl Iterator<Item = &'static str>,
-    ) -> Result<(), RegistryError> {
-        let mut seen = BTreeSet::new();
-        for name in names {
-            if !seen.insert(name) {
-                return Err(RegistryError::Duplicate { what, name });
-            }
-        }
-        Ok(())
-    }
     first_duplicate("task", tasks().into_iter().map(|t| t.name))?;
     first_duplicate("pose field", pose_fields().into_iter().map(|f| f.name))
+}
+
+fn first_duplicate(
+    what: &'static str,
+    names: impl Iterator<Item = &'static str>,
+) -> Result<(), RegistryError> {
+    let mut seen = BTreeSet::new();
+    for name in names {
+        if !seen.insert(name) {
+            return Err(RegistryError::Duplicate { what, name });
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -291,6 +292,8 @@ mod tests {
         assert!(names.windows(2).all(|w| w[0] < w[1]), "{names:?}");
         assert!(pose_fields().iter().any(|f| f.name == "zz_identity"));
         check_unique().unwrap();
+        let e = first_duplicate("task", ["a", "b", "a"].into_iter()).unwrap_err();
+        assert_eq!(e.to_string(), "task \"a\" is registered twice");
     }
 
     #[test]

@@ -82,17 +82,7 @@ impl RunDir {
                 }
                 dir.clone()
             }
-            None => {
-                let base = PathBuf::from("runs")
-                    .join(format!("{task}-{}", utc_compact(SystemTime::now())));
-                let mut path = base.clone();
-                let mut n = 2;
-                while path.exists() {
-                    path = PathBuf::from(format!("{}-{n}", base.display()));
-                    n += 1;
-                }
-                path
-            }
+            None => default_path(Path::new("runs"), task, SystemTime::now()),
         };
         std::fs::create_dir_all(&path).map_err(|error| RunDirError::Io {
             what: "creating run folder",
@@ -176,6 +166,20 @@ impl RunDir {
             let _ = writeln!(file, "{line}");
         }
     }
+}
+
+/// `<runs>/<task>-<YYYYmmdd-HHMMSS>`, with `-2`, `-3`, … appended while that exists.
+fn default_path(runs: &Path, task: &str, now: SystemTime) -> PathBuf {
+    let base = runs.join(format!("{task}-{}", utc_compact(now)));
+    let mut path = base.clone();
+    let mut n = 2;
+    while path.exists() {
+        let mut name = base.clone().into_os_string();
+        name.push(format!("-{n}"));
+        path = PathBuf::from(name);
+        n += 1;
+    }
+    path
 }
 
 fn is_non_empty_dir(path: &Path) -> bool {
@@ -289,6 +293,20 @@ mod tests {
             "{log}"
         );
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn default_folder_is_named_by_task_and_time_and_never_reused() {
+        let runs = temp("default");
+        let now = UNIX_EPOCH + Duration::from_secs(951_827_696);
+        let first = default_path(&runs, "nerf", now);
+        assert_eq!(first, runs.join("nerf-20000229-123456"));
+        std::fs::create_dir_all(&first).unwrap();
+        assert_eq!(
+            default_path(&runs, "nerf", now),
+            runs.join("nerf-20000229-123456-2")
+        );
+        std::fs::remove_dir_all(&runs).unwrap();
     }
 
     #[test]
