@@ -10,12 +10,18 @@
 mod real;
 mod time;
 
+pub mod config;
 pub mod eval;
 pub mod fs;
 pub mod pose_field;
+pub mod progress;
+pub mod registry;
+pub mod run_dir;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
+pub use config::{Config, ConfigError, RunConfig, Section};
 pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
 pub use real::Real;
+pub use registry::{FieldContext, PoseFieldSpec, Task, TaskInput};
 pub use time::{TimeRange, Timestamp};

@@ -1,0 +1,194 @@
+//! The `cpose` command line as a library, so that a program can register its own tasks or pose
+//! fields (with `inventory::submit!`) and run the same CLI:
+//!
+//! ```no_run
+//! fn main() -> std::process::ExitCode {
+//!     cpose_cli::main_with_args(std::env::args_os())
+//! }
+//! ```
+//!
+//! No algorithms live here: commands parse arguments, load the config, look the task up in the
+//! registry, create the run folder and call the task. Errors are printed once, as
+//! `cpose: <error with context>`; the exit code is 2 for usage and config errors and 1 when a
+//! run fails.
+
+// Name every application crate so that rustc links it and its registrations are visible, also
+// in programs that only call `main_with_args`.
+use cpose_events as _;
+use cpose_imu as _;
+use cpose_nerf as _;
+use cpose_slam as _;
+
+use std::ffi::OsString;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context as _;
+use clap::{Parser, Subcommand};
+use cpose_core::Config;
+use cpose_core::registry::{self, TaskInput};
+use cpose_core::run_dir::{RunDir, RunDirOptions};
+
+/// Continuous camera poses: run experiments, list tasks and pose fields.
+#[derive(Debug, Parser)]
+#[command(name = "cpose", version)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List the registered tasks and pose fields.
+    List,
+    /// Run the experiment described by a config file.
+    Run(RunArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct RunArgs {
+    /// The config file (TOML: `task = "…"`, an optional `[run]` table, the task's tables).
+    config: PathBuf,
+    /// Override a config value, e.g. `--set run.seed=3 --set model.width=64` (the value is
+    /// read as TOML, else as a string). Repeatable.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Run folder (default: `[run] out_dir`, else `runs/<task>-<YYYYmmdd-HHMMSS>`).
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Reuse a non-empty run folder (files with the same names are replaced).
+    #[arg(long)]
+    force: bool,
+    /// Do not echo the log to stderr and draw no progress bars.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+/// Why a command failed; decides the exit code.
+enum Failure {
+    /// Bad arguments or a bad config: exit code 2.
+    Usage(anyhow::Error),
+    /// The task failed while running: exit code 1.
+    Run(anyhow::Error),
+}
+
+/// Runs the CLI on `args` (the first one is the program name) and returns the exit code.
+pub fn main_with_args<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(err) => {
+            // Help and version go to stdout with exit code 0; usage errors to stderr with 2.
+            let _ = err.print();
+            return ExitCode::from(u8::try_from(err.exit_code()).unwrap_or(2));
+        }
+    };
+    let result = match cli.command {
+        Command::List => list(),
+        Command::Run(args) => run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure::Usage(err)) => {
+            eprintln!("cpose: {err:#}");
+            ExitCode::from(2)
+        }
+        Err(Failure::Run(err)) => {
+            eprintln!("cpose: {err:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// `cpose list`: tasks, then pose fields, each sorted by name with its one-line description.
+fn list() -> Result<(), Failure> {
+    registry::check_unique().map_err(|e| Failure::Run(e.into()))?;
+    let tasks: Vec<_> = registry::tasks()
+        .into_iter()
+        .map(|t| (t.name, t.about))
+        .collect();
+    let fields: Vec<_> = registry::pose_fields()
+        .into_iter()
+        .map(|f| (f.name, f.about))
+        .collect();
+    let width = tasks
+        .iter()
+        .chain(&fields)
+        .map(|(name, _)| name.len())
+        .max()
+        .unwrap_or(0);
+    let mut text = String::new();
+    for (title, entries) in [("tasks", &tasks), ("pose fields", &fields)] {
+        text.push_str(title);
+        text.push_str(":\n");
+        if entries.is_empty() {
+            text.push_str("  (none)\n");
+        }
+        for (name, about) in entries.iter() {
+            text.push_str(&format!("  {name:<width$}  {about}\n"));
+        }
+    }
+    // A closed pipe (`cpose list | head -1`) is not an error worth reporting.
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    Ok(())
+}
+
+/// `cpose run CONFIG`: load, look up, create the run folder, save the config, run, report.
+fn run(args: &RunArgs) -> Result<(), Failure> {
+    registry::check_unique().map_err(|e| Failure::Run(e.into()))?;
+    let usage = |e: anyhow::Error| Failure::Usage(e);
+    let config = Config::load(&args.config, &args.overrides).map_err(|e| usage(e.into()))?;
+    let run_config = config.run_config().map_err(|e| usage(e.into()))?;
+    let task = registry::task_for(&config).map_err(|e| usage(e.into()))?;
+    run_config.init_thread_pool();
+
+    let options = RunDirOptions {
+        out: args.out.clone(),
+        config_out_dir: run_config.out_dir.clone(),
+        allow_existing: args.force,
+        echo_log: !args.quiet,
+    };
+    let run_dir = RunDir::create(task.name, &options).map_err(|e| usage(e.into()))?;
+    run_dir
+        .write_config(&config)
+        .map_err(|e| Failure::Run(e.into()))?;
+    run_dir.log(format_args!(
+        "task {} with config {}",
+        task.name,
+        args.config.display()
+    ));
+
+    let input = TaskInput {
+        config: &config,
+        run_dir: &run_dir,
+        run: &run_config,
+        show_progress: !args.quiet,
+    };
+    let result = (task.run)(&input).with_context(|| {
+        format!(
+            "task {} failed (run folder {})",
+            task.name,
+            run_dir.path().display()
+        )
+    });
+    match result {
+        Ok(()) => {
+            run_dir.log("done");
+            let _ = writeln!(std::io::stdout().lock(), "{}", run_dir.path().display());
+            Ok(())
+        }
+        Err(err) => {
+            run_dir.log(format_args!("failed: {err:#}"));
+            // A task that rejects its config (typo, unknown pose field) is a config error.
+            if err.chain().any(|e| e.is::<cpose_core::ConfigError>()) {
+                Err(Failure::Usage(err))
+            } else {
+                Err(Failure::Run(err))
+            }
+        }
+    }
+}

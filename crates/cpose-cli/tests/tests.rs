@@ -1,0 +1,16 @@
+//! Integration tests of the `cpose` command line (one test binary, as ripgrep does).
+
+// An integration test is its own crate: name every application crate again so that their
+// registrations are linked here too (see research/rust-ecosystem.md §3).
+use cpose_events as _;
+use cpose_imu as _;
+use cpose_nerf as _;
+use cpose_slam as _;
+
+// Runs the built `cpose` binary: listing, and every kind of bad input.
+mod binary;
+// Runs `cpose_cli::main_with_args` in this process, with a task and a pose field registered
+// by the test itself: full runs, run folders, errors raised inside tasks.
+mod in_process;
+// Temporary folders and config files.
+mod util;
