@@ -10,10 +10,16 @@
 mod real;
 mod time;
 
+pub mod geometry;
 pub mod pose_field;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
+pub use geometry::{
+    EulerZyx, QuatJet, canonicalize_quat, hat, quat_from_wxyz, quat_from_xyzw, quat_to_wxyz,
+    quat_to_xyzw, rotation_angle_between, se3_exp, se3_log, so3_exp, so3_log, so3_r3_exp,
+    so3_r3_log, vee,
+};
 pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
 pub use real::Real;
 pub use time::{TimeRange, Timestamp};
