@@ -20,6 +20,8 @@ pub use geometry::{
     quat_to_xyzw, rotation_angle_between, se3_exp, se3_log, so3_exp, so3_log, so3_r3_exp,
     so3_r3_log, vee,
 };
-pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
+pub use pose_field::{
+    Composed, Order, ParamKind, PoseBatch, PoseField, PoseFieldError, SinusoidMotion,
+};
 pub use real::Real;
 pub use time::{TimeRange, Timestamp};
