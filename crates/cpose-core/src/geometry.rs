@@ -432,6 +432,30 @@ fn flip_cam_yz(world_from_cam: &Isometry3<f64>) -> Isometry3<f64> {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Gravity and specific force
+// ---------------------------------------------------------------------------------------------
+
+/// Standard gravity magnitude used inside cpose, m/s² (algorithms.md §6).
+pub const GRAVITY_M_S2: f64 = 9.81;
+
+/// `g_world = (0, 0, −9.81)` m/s²: worlds are z-up (synthetic data, EuRoC); a dataset with
+/// another up axis keeps its own world and states its gravity vector.
+pub fn gravity_world() -> Vector3<f64> {
+    Vector3::new(0.0, 0.0, -GRAVITY_M_S2)
+}
+
+/// The specific force an accelerometer rigidly attached to the body measures, in the body frame:
+/// `f = Rᵀ (p̈ − g_world)` with `R` the rotation of `world_from_body` (algorithms.md §6). At rest
+/// and level it is `(0, 0, +9.81)`: the reaction to gravity, pointing up.
+pub fn specific_force_body(
+    world_from_body_rotation: &UnitQuaternion<f64>,
+    lin_acc_world: &Vector3<f64>,
+    gravity_world: &Vector3<f64>,
+) -> Vector3<f64> {
+    world_from_body_rotation.inverse_transform_vector(&(lin_acc_world - gravity_world))
+}
+
+// ---------------------------------------------------------------------------------------------
 // Quaternion kinematics
 // ---------------------------------------------------------------------------------------------
 
@@ -768,6 +792,30 @@ mod tests {
                 assert!((again.matrix() - r.matrix()).abs().max() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn specific_force_at_rest_points_up() {
+        let level = UnitQuaternion::identity();
+        let f = specific_force_body(&level, &Vector3::zeros(), &gravity_world());
+        assert_eq!(f, Vector3::new(0.0, 0.0, 9.81));
+        // Rolled +90° about x: R = Rx(90°) maps body +y to world +z, so up is body +y.
+        let rolled = so3_exp(&Vector3::new(FRAC_PI_2, 0.0, 0.0));
+        let f = specific_force_body(&rolled, &Vector3::zeros(), &gravity_world());
+        assert!((f - Vector3::new(0.0, 9.81, 0.0)).norm() < 1e-14, "{f}");
+        // Free fall measures nothing.
+        let f = specific_force_body(&rolled, &gravity_world(), &gravity_world());
+        assert!(f.norm() < 1e-15);
+    }
+
+    #[test]
+    fn se3_tangent_is_rotation_first() {
+        let rot_only = se3_exp(&Vector6::new(0.0, 0.0, FRAC_PI_2, 0.0, 0.0, 0.0));
+        assert_eq!(rot_only.translation.vector, Vector3::zeros());
+        assert!((rot_only.rotation * Vector3::x() - Vector3::y()).norm() < 1e-15);
+        let trans_only = se3_exp(&Vector6::new(0.0, 0.0, 0.0, 1.0, 2.0, 3.0));
+        assert_eq!(trans_only.rotation, UnitQuaternion::identity());
+        assert_eq!(trans_only.translation.vector, Vector3::new(1.0, 2.0, 3.0));
     }
 
     // ----- SO(3) -----------------------------------------------------------------------------

@@ -16,9 +16,9 @@ pub mod pose_field;
 pub mod testing;
 
 pub use geometry::{
-    EulerZyx, QuatJet, canonicalize_quat, hat, quat_from_wxyz, quat_from_xyzw, quat_to_wxyz,
-    quat_to_xyzw, rotation_angle_between, se3_exp, se3_log, so3_exp, so3_log, so3_r3_exp,
-    so3_r3_log, vee,
+    EulerZyx, QuatJet, canonicalize_quat, gravity_world, hat, quat_from_wxyz, quat_from_xyzw,
+    quat_to_wxyz, quat_to_xyzw, rotation_angle_between, se3_exp, se3_log, so3_exp, so3_log,
+    so3_r3_exp, so3_r3_log, specific_force_body, vee,
 };
 pub use pose_field::{
     Composed, Order, ParamKind, PoseBatch, PoseField, PoseFieldError, SinusoidMotion,
