@@ -13,6 +13,7 @@ mod time;
 pub mod config;
 pub mod eval;
 pub mod fs;
+pub mod geometry;
 pub mod pose_field;
 pub mod progress;
 pub mod registry;
@@ -21,7 +22,14 @@ pub mod run_dir;
 pub mod testing;
 
 pub use config::{Config, ConfigError, RunConfig, Section};
-pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
+pub use geometry::{
+    EulerZyx, QuatJet, canonicalize_quat, gravity_world, hat, quat_from_wxyz, quat_from_xyzw,
+    quat_to_wxyz, quat_to_xyzw, rotation_angle_between, se3_exp, se3_log, so3_exp, so3_log,
+    so3_r3_exp, so3_r3_log, specific_force_body, vee,
+};
+pub use pose_field::{
+    Composed, Order, ParamKind, PoseBatch, PoseField, PoseFieldError, SinusoidMotion,
+};
 pub use real::Real;
 pub use registry::{FieldContext, PoseFieldSpec, Task, TaskInput};
 pub use time::{TimeRange, Timestamp};

@@ -21,6 +21,12 @@ use thiserror::Error;
 
 use crate::{Real, TimeRange};
 
+pub mod composed;
+pub mod sinusoid;
+
+pub use composed::Composed;
+pub use sinusoid::SinusoidMotion;
+
 /// The highest time derivative an evaluation computes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Order {
