@@ -348,6 +348,67 @@ mod tests {
     }
 
     #[test]
+    fn time_derivatives_match_forward_mode_autodiff() {
+        use num_dual::{Dual2_64, DualNum, second_derivative};
+        type D = Dual2_64;
+        // An oracle independent of the product rule: q(t) evaluated in second-order dual numbers.
+        let mut field = SinusoidMotion::<f64>::random(range(), 8, 3, 1.0, 1.2, 0.2, 2.0).unwrap();
+        field.params_mut(&mut |_, p| p[5 * 4] = 2.5); // yaw offset far from 0
+        let k = field.num_terms();
+        let chan = |c: usize, t: D| -> D {
+            let p = &field.params[c * (k + 1)..(c + 1) * (k + 1)];
+            let mut v = D::from_re(p[0]);
+            for j in 0..k {
+                v += (t * field.omegas[j] + field.phases[c * k + j]).sin() * p[j + 1];
+            }
+            v
+        };
+        let hamilton = |a: [D; 4], b: [D; 4]| -> [D; 4] {
+            [
+                a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+                a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+                a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+                a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+            ]
+        };
+        let axis_q = |theta: D, axis: usize| -> [D; 4] {
+            let half = theta * 0.5;
+            let mut q = [
+                half.cos(),
+                D::from_re(0.0),
+                D::from_re(0.0),
+                D::from_re(0.0),
+            ];
+            q[axis + 1] = half.sin();
+            q
+        };
+        let ts = times();
+        let mut out = PoseBatch::default();
+        field.evaluate(&ts, Order::Acceleration, &mut out).unwrap();
+        for (i, &t) in ts.iter().enumerate() {
+            let q: [(f64, f64, f64); 4] = second_derivative(
+                |t: D| {
+                    let zy = hamilton(axis_q(chan(5, t), 2), axis_q(chan(4, t), 1));
+                    hamilton(zy, axis_q(chan(3, t), 0))
+                },
+                t,
+            );
+            let wxyz = |x: &Quaternion<f64>| [x.w, x.i, x.j, x.k];
+            for (m, (v, d1, d2)) in q.iter().enumerate() {
+                assert!((wxyz(&out.rotation[i])[m] - v).abs() < 1e-14);
+                assert!((wxyz(&out.rotation_rate[i])[m] - d1).abs() < 1e-13);
+                assert!((wxyz(&out.rotation_acc[i])[m] - d2).abs() < 1e-12);
+            }
+            for c in 0..3 {
+                let (v, d1, d2) = second_derivative(|t: D| chan(c, t), t);
+                assert!((out.translation[i][c] - v).abs() < 1e-14);
+                assert!((out.lin_vel_world[i][c] - d1).abs() < 1e-13);
+                assert!((out.lin_acc_world[i][c] - d2).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
     fn sinusoid_rotation_is_zyx_euler_of_its_channels() {
         let field = SinusoidMotion::<f64>::handheld(range(), 5);
         let mut out = PoseBatch::default();
