@@ -27,6 +27,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use cpose_core::Config;
+use cpose_core::eval::{self, Alignment};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{RunDir, RunDirOptions};
 
@@ -44,6 +45,32 @@ enum Command {
     List,
     /// Run the experiment described by a config file.
     Run(RunArgs),
+    /// Evaluate trajectories.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum EvalCommand {
+    /// Absolute trajectory error of the translation part, as `evo_ape tum GT EST [-a|-as]`.
+    Ate(AteArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct AteArgs {
+    /// Reference trajectory (TUM format: `timestamp tx ty tz qx qy qz qw`).
+    gt: PathBuf,
+    /// Estimated trajectory (TUM format).
+    est: PathBuf,
+    /// Alignment of the estimate before the error: `se3` (evo `-a`), `sim3` (evo `-as`) or `none`.
+    #[arg(long, default_value = "se3")]
+    align: Alignment,
+    /// Largest timestamp difference of an associated pose pair, seconds (evo's default 0.01).
+    #[arg(long, default_value_t = 0.01, value_name = "SECS")]
+    max_diff: f64,
+    /// Print the full report as JSON instead of text.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -90,6 +117,7 @@ where
     let result = match cli.command {
         Command::List => list(),
         Command::Run(args) => run(&args),
+        Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -191,4 +219,34 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
             }
         }
     }
+}
+
+/// `cpose eval ate GT EST`: association, alignment and translation-error statistics (metres).
+fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
+    let usage = |e: anyhow::Error| Failure::Usage(e);
+    let gt = eval::read_tum(&args.gt).map_err(|e| usage(e.into()))?;
+    let est = eval::read_tum(&args.est).map_err(|e| usage(e.into()))?;
+    let report = eval::ate(&gt, &est, args.align, args.max_diff)
+        .with_context(|| format!("comparing {} with {}", args.est.display(), args.gt.display()))
+        .map_err(Failure::Run)?;
+    let text = if args.json {
+        serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
+    } else {
+        format!(
+            "matched {} pose pairs (max time difference {} s), alignment {}{}\n\
+             rmse   {:.9} m\nmean   {:.9} m\nmedian {:.9} m\nstd    {:.9} m\nmin    {:.9} m\nmax    {:.9} m\n",
+            report.num_matched,
+            args.max_diff,
+            report.alignment,
+            if report.alignment == Alignment::Sim3 { format!(" (scale {:.9})", report.transform.scale) } else { String::new() },
+            report.rmse_m,
+            report.mean_m,
+            report.median_m,
+            report.std_m,
+            report.min_m,
+            report.max_m,
+        )
+    };
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    Ok(())
 }

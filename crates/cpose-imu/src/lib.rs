@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 pub mod euroc;
 pub mod imu;
 pub mod losses;
+mod trajectory;
 
 pub use cpose_slam;
-pub use imu::{ImuSample, gravity_world};
+pub use imu::ImuSample;
 
 /// Errors reading IMU and trajectory data.
 #[derive(Debug, thiserror::Error)]

@@ -181,12 +181,12 @@ mod tests {
     #[test]
     fn accel_loss_gradient_and_gravity_at_rest() {
         let accel = [Vector3::new(0.3, -0.1, 9.8), Vector3::new(-0.5, 0.2, 9.1), Vector3::new(1.05, 0.4, -0.3)];
-        let g = crate::gravity_world();
+        let g = cpose_core::gravity_world();
         check(|b, gr| accel_l1(b, &accel, &g, 2.0, 0.9, gr));
         // At rest and level, the accelerometer reads +9.81 along body z.
         let mut b = PoseBatch::zeros(1, Order::Acceleration);
         b.rotation[0] = Quaternion::identity();
-        let at_rest = [Vector3::new(0.0, 0.0, crate::imu::GRAVITY_M_S2)];
+        let at_rest = [Vector3::new(0.0, 0.0, cpose_core::geometry::GRAVITY_M_S2)];
         assert!(accel_l1(&b, &at_rest, &g, 1.0, 1.0, &mut PoseBatch::zeros(1, Order::Acceleration)) < 1e-12);
     }
 }

@@ -28,7 +28,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::euroc::EurocSequence;
-use crate::imu::{ImuSample, gravity_world};
+use crate::imu::ImuSample;
+use cpose_core::gravity_world;
 use crate::losses;
 
 inventory::submit! {
@@ -195,6 +196,8 @@ struct Sequence {
     poses: Vec<Isometry3<f64>>,
     /// Indices of the supervising poses (every `known_every`-th, first and last included).
     known: Vec<usize>,
+    /// Their times.
+    known_times: Vec<f64>,
     imu: Vec<ImuSample>,
 }
 
@@ -274,11 +277,13 @@ impl Sequence {
         }
         let t0 = times[keep[0]];
         let t1 = times[keep[keep.len() - 1]];
+        let known: Vec<usize> = (0..keep.len()).step_by(data.known_every).collect();
         Ok(Self {
             origin_secs: origin + t0,
             times: keep.iter().map(|&i| times[i] - t0).collect(),
             poses: keep.iter().map(|&i| poses[i]).collect(),
-            known: (0..keep.len()).step_by(data.known_every).collect(),
+            known_times: known.iter().map(|&i| times[keep[i]] - t0).collect(),
+            known,
             imu: imu.into_iter().filter(|s| s.t_secs >= t0 && s.t_secs <= t1).map(|s| ImuSample { t_secs: s.t_secs - t0, ..s }).collect(),
         })
     }
@@ -356,7 +361,7 @@ fn rms(errors: impl Iterator<Item = f64>) -> Option<f64> {
 /// Slerp/linear interpolation of the known poses at time `t`, and the body angular velocity of
 /// that interpolation (constant between two known poses).
 fn interpolate(seq: &Sequence, t: f64) -> (Isometry3<f64>, Vector3<f64>) {
-    let known_times: Vec<f64> = seq.known.iter().map(|&i| seq.times[i]).collect();
+    let known_times = &seq.known_times;
     let k = known_times.partition_point(|&x| x <= t).clamp(1, known_times.len() - 1);
     let (a, b) = (&seq.poses[seq.known[k - 1]], &seq.poses[seq.known[k]]);
     let (ta, tb) = (known_times[k - 1], known_times[k]);
@@ -372,7 +377,6 @@ struct Fit<'a> {
     seq: &'a Sequence,
     norm: &'a Normalisation,
     cfg: &'a FitConfig,
-    known_times: Vec<f64>,
     known_targets: Vec<Isometry3<f64>>,
     imu_order: Vec<usize>,
 }
@@ -394,11 +398,11 @@ impl Fit<'_> {
         let mut loss = f64::NAN;
         for it in 0..iterations {
             grad.fill(0.0);
-            let n = self.known_times.len();
-            field.forward(&self.known_times, Order::Pose, &mut out)?;
+            let n = self.seq.known_times.len();
+            field.forward(&self.seq.known_times, Order::Pose, &mut out)?;
             cot.reset(n, Order::Pose);
             loss = losses::pose_l2(&out, &self.known_targets, 1.0, 1.0, &mut cot);
-            field.backward(&self.known_times, &cot, &mut grad)?;
+            field.backward(&self.seq.known_times, &cot, &mut grad)?;
             if mode != ImuMode::None {
                 imu_times.clear();
                 gyro.clear();
@@ -466,7 +470,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         seq.imu.len(),
         norm.centre.as_slice(),
         norm.scale
-    ))?;
+    ));
 
     let write_trajectory = |name: &str, times: &[f64], poses: Vec<Isometry3<f64>>| -> anyhow::Result<()> {
         let absolute = times.iter().map(|t| t + seq.origin_secs).collect();
@@ -475,8 +479,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         Ok(())
     };
     write_trajectory("gt.txt", &seq.times, seq.poses.clone())?;
-    let known_times: Vec<f64> = seq.known.iter().map(|&i| seq.times[i]).collect();
-    write_trajectory("known.txt", &known_times, seq.known.iter().map(|&i| seq.poses[i]).collect())?;
+    let known_times = &seq.known_times;
+    write_trajectory("known.txt", known_times, seq.known.iter().map(|&i| seq.poses[i]).collect())?;
 
     let mut metrics: BTreeMap<&str, BTreeMap<String, MethodMetrics>> = BTreeMap::new();
     // Reference: interpolation of the known poses.
@@ -494,7 +498,6 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         seq: &seq,
         norm: &norm,
         cfg: &exp.fit,
-        known_times: known_times.clone(),
         known_targets: seq.known.iter().map(|&i| norm.to_field(&seq.poses[i])).collect(),
         imu_order: (0..seq.imu.len()).collect(),
     };
@@ -529,7 +532,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 mode.key(),
                 trans_err_m * 100.0,
                 ang_vel_rmse_rad_s.map_or("-".into(), |w| format!("{w:.4} rad/s")),
-            ))?;
+            ));
             metrics.entry(mode.key()).or_default().insert(
                 name.clone(),
                 MethodMetrics { rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m, ang_vel_rmse_rad_s, held_out_poses: held_out.len(), num_params: Some(field.num_params()), final_loss: Some(final_loss), wall_s },
@@ -538,7 +541,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     }
     progress.finish();
     input.run_dir.write_json("metrics.json", &metrics)?;
-    input.run_dir.log(&summary_table(&metrics))?;
+    input.run_dir.log(summary_table(&metrics));
     Ok(())
 }
 

@@ -251,7 +251,8 @@ pub fn check_times(range: &TimeRange, times_secs: &[f64]) -> Result<(), PoseFiel
 /// Fields are generic over `S` so that the same code runs in `f32` for training and in `f64` for
 /// gradient checks; `dyn PoseField` means `dyn PoseField<f32>`.
 ///
-/// Contract, checked for every implementation by [`crate::testing::check_pose_field`]:
+/// Contract, checked for every implementation by `cpose_core::testing::check_pose_field`
+/// (feature `testing`):
 /// - `rotation` is a unit quaternion and continuous in `t` (no sign flips);
 /// - `rotation_rate = dq/dt`, `rotation_acc = d²q/dt²`, `lin_vel_world = dp/dt`,
 ///   `lin_acc_world = d²p/dt²` exactly (not by finite differences);
