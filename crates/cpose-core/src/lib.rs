@@ -10,8 +10,10 @@
 mod real;
 mod time;
 
+pub mod nn;
 pub mod pose_field;
 
+pub use pose_field::posenet::{PoseNet, PoseNetConfig};
 pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
 pub use real::Real;
 pub use time::{TimeRange, Timestamp};

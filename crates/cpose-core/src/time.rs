@@ -43,8 +43,10 @@ pub struct TimeRange {
 impl TimeRange {
     /// A range `[start_secs, end_secs]`; `None` unless both are finite and `start_secs < end_secs`.
     pub fn new(start_secs: f64, end_secs: f64) -> Option<Self> {
-        (start_secs.is_finite() && end_secs.is_finite() && start_secs < end_secs)
-            .then_some(Self { start_secs, end_secs })
+        (start_secs.is_finite() && end_secs.is_finite() && start_secs < end_secs).then_some(Self {
+            start_secs,
+            end_secs,
+        })
     }
     /// `end_secs − start_secs`.
     pub fn duration_secs(&self) -> f64 {

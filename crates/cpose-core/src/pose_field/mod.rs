@@ -21,6 +21,8 @@ use thiserror::Error;
 
 use crate::{Real, TimeRange};
 
+pub mod posenet;
+
 /// The highest time derivative an evaluation computes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Order {
@@ -67,7 +69,9 @@ pub enum PoseFieldError {
         got: usize,
     },
     /// Gradients were requested for a higher derivative than the forward pass computed.
-    #[error("backward needs derivatives up to {needed:?}, but the forward pass computed {computed:?}")]
+    #[error(
+        "backward needs derivatives up to {needed:?}, but the forward pass computed {computed:?}"
+    )]
     Order {
         /// Order of the cotangents.
         needed: Order,
@@ -167,7 +171,8 @@ impl PoseBatch {
 
     /// Linear velocity in the body frame, `Rᵀ ṗ`.
     pub fn lin_vel_body(&self, i: usize) -> Vector3<f64> {
-        UnitQuaternion::new_normalize(self.rotation[i]).inverse_transform_vector(&self.lin_vel_world[i])
+        UnitQuaternion::new_normalize(self.rotation[i])
+            .inverse_transform_vector(&self.lin_vel_world[i])
     }
 
     /// Accumulates into this cotangent batch the gradient of a loss whose gradient with respect
@@ -192,14 +197,34 @@ impl PoseBatch {
         let lens = [
             ("rotation", self.rotation.len(), n),
             ("translation", self.translation.len(), n),
-            ("rotation_rate", self.rotation_rate.len(), if order >= Order::Velocity { n } else { 0 }),
-            ("lin_vel_world", self.lin_vel_world.len(), if order >= Order::Velocity { n } else { 0 }),
-            ("rotation_acc", self.rotation_acc.len(), if order >= Order::Acceleration { n } else { 0 }),
-            ("lin_acc_world", self.lin_acc_world.len(), if order >= Order::Acceleration { n } else { 0 }),
+            (
+                "rotation_rate",
+                self.rotation_rate.len(),
+                if order >= Order::Velocity { n } else { 0 },
+            ),
+            (
+                "lin_vel_world",
+                self.lin_vel_world.len(),
+                if order >= Order::Velocity { n } else { 0 },
+            ),
+            (
+                "rotation_acc",
+                self.rotation_acc.len(),
+                if order >= Order::Acceleration { n } else { 0 },
+            ),
+            (
+                "lin_acc_world",
+                self.lin_acc_world.len(),
+                if order >= Order::Acceleration { n } else { 0 },
+            ),
         ];
         for (what, got, expected) in lens {
             if got != expected {
-                return Err(PoseFieldError::Shape { what, expected, got });
+                return Err(PoseFieldError::Shape {
+                    what,
+                    expected,
+                    got,
+                });
             }
         }
         Ok(())
@@ -209,7 +234,10 @@ impl PoseBatch {
 /// Returns the first time outside `range` as an error.
 pub fn check_times(range: &TimeRange, times_secs: &[f64]) -> Result<(), PoseFieldError> {
     match times_secs.iter().find(|t| !range.contains(**t)) {
-        Some(&t_secs) => Err(PoseFieldError::OutOfRange { t_secs, range: *range }),
+        Some(&t_secs) => Err(PoseFieldError::OutOfRange {
+            t_secs,
+            range: *range,
+        }),
         None => Ok(()),
     }
 }
@@ -239,17 +267,32 @@ pub trait PoseField<S: Real = f32>: Send + Sync {
 
     /// Evaluates at `times_secs` up to `order` into `out` (resized). An out-of-range time is an
     /// error. Caches nothing.
-    fn evaluate(&self, times_secs: &[f64], order: Order, out: &mut PoseBatch) -> Result<(), PoseFieldError>;
+    fn evaluate(
+        &self,
+        times_secs: &[f64],
+        order: Order,
+        out: &mut PoseBatch,
+    ) -> Result<(), PoseFieldError>;
 
     /// As [`PoseField::evaluate`], and keeps what [`PoseField::backward`] needs.
-    fn forward(&mut self, times_secs: &[f64], order: Order, out: &mut PoseBatch) -> Result<(), PoseFieldError> {
+    fn forward(
+        &mut self,
+        times_secs: &[f64],
+        order: Order,
+        out: &mut PoseBatch,
+    ) -> Result<(), PoseFieldError> {
         self.evaluate(times_secs, order, out)
     }
 
     /// Accumulates into `param_grad` (length [`PoseField::num_params`]) the gradient of a loss
     /// given its cotangents `grad` with respect to the outputs of the last
     /// [`PoseField::forward`] at the same `times_secs`.
-    fn backward(&mut self, times_secs: &[f64], grad: &PoseBatch, param_grad: &mut [S]) -> Result<(), PoseFieldError>;
+    fn backward(
+        &mut self,
+        times_secs: &[f64],
+        grad: &PoseBatch,
+        param_grad: &mut [S],
+    ) -> Result<(), PoseFieldError>;
 }
 
 /// Copies all parameters into one flat vector (for checkpoints and tests).
@@ -260,9 +303,16 @@ pub fn params_to_vec<S: Real>(field: &dyn PoseField<S>) -> Vec<S> {
 }
 
 /// Overwrites all parameters from one flat vector laid out as [`params_to_vec`].
-pub fn params_from_slice<S: Real>(field: &mut dyn PoseField<S>, values: &[S]) -> Result<(), PoseFieldError> {
+pub fn params_from_slice<S: Real>(
+    field: &mut dyn PoseField<S>,
+    values: &[S],
+) -> Result<(), PoseFieldError> {
     if values.len() != field.num_params() {
-        return Err(PoseFieldError::Shape { what: "parameters", expected: field.num_params(), got: values.len() });
+        return Err(PoseFieldError::Shape {
+            what: "parameters",
+            expected: field.num_params(),
+            got: values.len(),
+        });
     }
     let mut offset = 0;
     field.params_mut(&mut |_, p| {
@@ -318,8 +368,15 @@ mod tests {
                 qp.coords[k] += h;
                 qm.coords[k] -= h;
                 let fd = (loss(&plus) - loss(&minus)) / (2.0 * h);
-                let an = if rate { cot.rotation_rate[0].coords[k] } else { cot.rotation[0].coords[k] };
-                assert!((fd - an).abs() < 1e-7, "component {k} rate={rate}: fd {fd} vs {an}");
+                let an = if rate {
+                    cot.rotation_rate[0].coords[k]
+                } else {
+                    cot.rotation[0].coords[k]
+                };
+                assert!(
+                    (fd - an).abs() < 1e-7,
+                    "component {k} rate={rate}: fd {fd} vs {an}"
+                );
             }
         }
     }
@@ -328,6 +385,12 @@ mod tests {
     fn out_of_range_time_is_an_error() {
         let r = TimeRange::new(0.0, 1.0).unwrap();
         assert_eq!(check_times(&r, &[0.0, 0.5, 1.0]), Ok(()));
-        assert_eq!(check_times(&r, &[0.5, 1.5]), Err(PoseFieldError::OutOfRange { t_secs: 1.5, range: r }));
+        assert_eq!(
+            check_times(&r, &[0.5, 1.5]),
+            Err(PoseFieldError::OutOfRange {
+                t_secs: 1.5,
+                range: r
+            })
+        );
     }
 }
