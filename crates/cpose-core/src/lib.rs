@@ -14,6 +14,7 @@ pub mod config;
 pub mod eval;
 pub mod fs;
 pub mod geometry;
+pub mod nn;
 pub mod pose_field;
 pub mod progress;
 pub mod registry;
@@ -28,7 +29,7 @@ pub use geometry::{
     so3_r3_exp, so3_r3_log, specific_force_body, vee,
 };
 pub use pose_field::{
-    Composed, Order, ParamKind, PoseBatch, PoseField, PoseFieldError, SinusoidMotion,
+    Composed, PoseNet, PoseNetConfig, Order, ParamKind, PoseBatch, PoseField, PoseFieldError, SinusoidMotion,
 };
 pub use real::Real;
 pub use registry::{FieldContext, PoseFieldSpec, Task, TaskInput};

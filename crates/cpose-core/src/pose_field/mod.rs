@@ -22,9 +22,11 @@ use thiserror::Error;
 use crate::{Real, TimeRange};
 
 pub mod composed;
+pub mod posenet;
 pub mod sinusoid;
 
 pub use composed::Composed;
+pub use posenet::{PoseNet, PoseNetConfig};
 pub use sinusoid::SinusoidMotion;
 
 /// The highest time derivative an evaluation computes.

@@ -1,0 +1,32 @@
+//! A small neural-network kit with exact input derivatives: activations, an MLP with tangent
+//! streams and a hand-written reverse pass (matrix products through faer), input encodings,
+//! seeded initialisation and Adam.
+//!
+//! Scalars are generic over [`Real`](crate::Real): `f32` for training, `f64` for gradient checks.
+//! Buffers live in workspaces that grow with the batch and are reused, so a training loop does
+//! not allocate in its steady state.
+
+mod activation;
+mod adam;
+mod embedding;
+mod mlp;
+
+pub use activation::Activation;
+pub use adam::{Adam, ExponentialDecay};
+pub use embedding::{Embedding, Encoding};
+pub use faer::Accum;
+pub use mlp::{Init, Mlp, MlpSpec, MlpWorkspace};
+
+/// Rows (samples × streams) per part below which splitting a batch across threads does not pay.
+pub const MIN_ROWS_PER_PART: usize = 256;
+
+/// How many parts to split a batch of `rows` stacked rows into: at most
+/// `rayon::current_num_threads()`, each with at least [`MIN_ROWS_PER_PART`] rows.
+pub fn batch_parts(rows: usize) -> usize {
+    (rows / MIN_ROWS_PER_PART).clamp(1, rayon::current_num_threads().max(1))
+}
+
+/// The sample range of part `p` of `parts` over `n` samples (contiguous, sizes differ by ≤ 1).
+pub fn part_range(n: usize, parts: usize, p: usize) -> std::ops::Range<usize> {
+    (p * n / parts)..((p + 1) * n / parts)
+}
