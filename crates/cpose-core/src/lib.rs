@@ -14,6 +14,8 @@ pub mod pose_field;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
-pub use pose_field::{Order, ParamKind, PoseBatch, PoseField, PoseFieldError};
+pub use pose_field::{
+    DiscretePoses, DiscretePosesConfig, Order, ParamKind, PoseBatch, PoseField, PoseFieldError,
+};
 pub use real::Real;
 pub use time::{TimeRange, Timestamp};

@@ -21,6 +21,13 @@ use thiserror::Error;
 
 use crate::{Real, TimeRange};
 
+mod discrete;
+mod lie_dual;
+mod spline;
+
+pub use discrete::{DiscretePoses, DiscretePosesConfig};
+// SPLINE
+
 /// The highest time derivative an evaluation computes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Order {
