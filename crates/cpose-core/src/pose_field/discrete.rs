@@ -1,7 +1,7 @@
 //! BARF's discrete per-frame poses (Lin et al. 2021, `model/barf.py`), made a continuous field by
 //! interpolating the se(3) tangents between frames.
 
-use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Vector3};
 use num_dual::{Dual2, DualSVec64};
 use serde::{Deserialize, Serialize};
 
@@ -53,10 +53,11 @@ impl<S: Real> DiscretePoses<S> {
                 frame_times_secs.len()
             )));
         }
-        if let Some(w) = frame_times_secs
-            .windows(2)
-            .find(|w| !(w[0] < w[1]) || !w[0].is_finite() || !w[1].is_finite())
-        {
+        if let Some(w) = frame_times_secs.windows(2).find(|w| {
+            w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less)
+                || !w[0].is_finite()
+                || !w[1].is_finite()
+        }) {
             return Err(PoseFieldError::Invalid(format!(
                 "frame times must be finite and strictly increasing, got {} then {}",
                 w[0], w[1]
@@ -174,7 +175,7 @@ pub(crate) fn exp_se3(xi: &[f64; 6]) -> Isometry3<f64> {
     let p = lie_dual::se3_v_times(&omega, &[xi[3], xi[4], xi[5]]);
     Isometry3::from_parts(
         Vector3::from(p).into(),
-        UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+        nalgebra::UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
     )
 }
 

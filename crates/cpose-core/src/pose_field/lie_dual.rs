@@ -274,7 +274,7 @@ pub(crate) fn pullback<const N: usize>(
     let mut g = [0.0; N];
     let mut add = |d: &DualSVec64<N>, c: f64| {
         if c != 0.0 {
-            let e = d.eps.clone().unwrap_generic(Const::<N>, U1);
+            let e = d.eps.unwrap_generic(Const::<N>, U1);
             for k in 0..N {
                 g[k] += c * e[k];
             }

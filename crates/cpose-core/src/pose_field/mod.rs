@@ -26,7 +26,7 @@ mod lie_dual;
 mod spline;
 
 pub use discrete::{DiscretePoses, DiscretePosesConfig};
-// SPLINE
+pub use spline::{LieSplinePoses, PerDimSplinePoses, SplineConfig, SplineKind, SplinePoses};
 
 /// The highest time derivative an evaluation computes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
