@@ -75,28 +75,37 @@ impl<S: Real> DiscretePoses<S> {
         })
     }
 
-    /// Poses `world_from_body[i]` at the frame times, stored as `ξ_i = Log(pose_i)` (rotation
-    /// angle in `[0, π]`; `Log` inverts [`DiscretePoses`]'s `Exp` exactly up to rounding, so the
-    /// field reproduces the poses at the frame times).
+    /// Poses `world_from_body[i]` at the frame times, stored as `ξ_i = Log(pose_i)` (see
+    /// [`DiscretePoses::set_poses`]).
     pub fn from_poses(
         frame_times_secs: &[f64],
         world_from_body: &[Isometry3<f64>],
     ) -> Result<Self, PoseFieldError> {
         let mut field = Self::new(frame_times_secs)?;
-        if world_from_body.len() != frame_times_secs.len() {
+        field.set_poses(world_from_body)?;
+        Ok(field)
+    }
+
+    /// Overwrites every `ξ_i` with `Log(world_from_body[i])`, in place (e.g. to reset the frames
+    /// to a spline fitted to them, the B-spline baseline's "re-fit every 100 steps"). `Log` takes
+    /// the rotation angle in `[0, π]` and inverts `Exp` up to rounding, so the field reproduces
+    /// the poses at the frame times; between frames the tangents are interpolated, which suits
+    /// small per-frame corrections (BARF) rather than poses rotating by more than π in total.
+    pub fn set_poses(&mut self, world_from_body: &[Isometry3<f64>]) -> Result<(), PoseFieldError> {
+        if world_from_body.len() != self.frame_times_secs.len() {
             return Err(PoseFieldError::Shape {
                 what: "poses",
-                expected: frame_times_secs.len(),
+                expected: self.frame_times_secs.len(),
                 got: world_from_body.len(),
             });
         }
         for (i, pose) in world_from_body.iter().enumerate() {
             let xi = log_se3(pose)?;
             for k in 0..PER_FRAME {
-                field.xi[PER_FRAME * i + k] = S::from_f64(xi[k]);
+                self.xi[PER_FRAME * i + k] = S::from_f64(xi[k]);
             }
         }
-        Ok(field)
+        Ok(())
     }
 
     /// The frame times, seconds.

@@ -61,6 +61,10 @@ fn check_grad_len(got: usize, expected: usize) -> Result<(), PoseFieldError> {
     Ok(())
 }
 
+/// Below this rotation angle (radians, compared against `|r|`) the axis of a rotation vector is
+/// taken as undefined when unwrapping, and the previous vector's axis is used instead.
+const AXIS_MIN_ANGLE: f64 = 1e-9;
+
 /// Rotation vectors of `rotations`, made continuous: each is the equivalent rotation vector
 /// `n (θ + 2πk)` (angle-axis `(θ, n)`, any integer `k`) closest to its predecessor, so that
 /// fitting or interpolating them per dimension does not jump at ±π.
@@ -74,9 +78,9 @@ pub(crate) fn unwrap_rotation_vectors(rotations: &[UnitQuaternion<f64>]) -> Vec<
             continue;
         };
         let theta = r.norm();
-        let axis = if theta > 1e-9 {
+        let axis = if theta > AXIS_MIN_ANGLE {
             r / theta
-        } else if prev.norm() > 1e-9 {
+        } else if prev.norm() > AXIS_MIN_ANGLE {
             prev.normalize()
         } else {
             Vector3::x()
@@ -682,7 +686,8 @@ pub struct SplineConfig {
     /// B-spline on SO(3)×R³).
     pub kind: SplineKind,
     /// Number of control points, at least 4. Default 5 (the paper's planar experiment: "5 knots,
-    /// degree 3"). Ignored when `knot_spacing_secs` is set.
+    /// degree 3", read as 5 control points; the paper does not say which). Ignored when
+    /// `knot_spacing_secs` is set.
     pub control_points: usize,
     /// Knot spacing in seconds; when set, the spline gets `⌈duration / knot_spacing_secs⌉ + 3`
     /// control points instead of `control_points`. Default unset.
@@ -896,9 +901,10 @@ mod tests {
             assert!(e.ang_acc_body(i).norm() < 1e-12);
             // Control k belongs to time a + (k − 1)Δt, so the angle is α((t − a)/Δt + 1).
             let angle = alpha * ((t - 0.5) / s.knot_spacing_secs() + 1.0);
-            let want = UnitQuaternion::from_scaled_axis(axis * angle);
-            assert!((e.rotation[i] - want.quaternion()).norm() < 1e-12 || angle > 0.0);
-            assert!(UnitQuaternion::new_normalize(e.rotation[i]).angle_to(&want) < 1e-9);
+            // Sign included: exp(angle·axis/2) with angles beyond π (no hemisphere flips).
+            let want =
+                nalgebra::Quaternion::from_parts((0.5 * angle).cos(), axis * (0.5 * angle).sin());
+            assert!((e.rotation[i] - want).norm() < 1e-12, "t = {t}");
         }
     }
 
@@ -926,6 +932,48 @@ mod tests {
             crate::pose_field::params_to_vec(&s2),
             crate::pose_field::params_to_vec(&s)
         );
+    }
+
+    #[test]
+    fn barf_with_bspline_refit_round_trip() {
+        // The baseline's reset: per-frame poses → least-squares spline → per-frame poses again.
+        let r = TimeRange::new(0.0, 2.0).unwrap();
+        let frames: Vec<f64> = (0..21).map(|k| 0.1 * k as f64).collect();
+        let noisy: Vec<_> = frames
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                let wiggle = if k % 2 == 0 { 1e-3 } else { -1e-3 };
+                Isometry3::from_parts(
+                    Translation3::new(t + wiggle, 0.5 * t, 0.0),
+                    UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 0.4 * t + wiggle)),
+                )
+            })
+            .collect();
+        let mut discrete = crate::DiscretePoses::<f32>::from_poses(&frames, &noisy).unwrap();
+        let mut poses_now = PoseBatch::default();
+        discrete
+            .evaluate(&frames, Order::Pose, &mut poses_now)
+            .unwrap();
+        let poses: Vec<_> = (0..frames.len())
+            .map(|i| poses_now.world_from_body(i))
+            .collect();
+        let spline = PerDimSplinePoses::<f64>::from_samples(r, 5, &frames, &poses).unwrap();
+        let mut smooth = PoseBatch::default();
+        spline.evaluate(&frames, Order::Pose, &mut smooth).unwrap();
+        let smooth: Vec<_> = (0..frames.len())
+            .map(|i| smooth.world_from_body(i))
+            .collect();
+        discrete.set_poses(&smooth).unwrap();
+        discrete
+            .evaluate(&frames, Order::Pose, &mut poses_now)
+            .unwrap();
+        for (i, &t) in frames.iter().enumerate() {
+            let got = poses_now.world_from_body(i);
+            // The alternating wiggle is smoothed away (up to f32 storage).
+            assert!((got.translation.vector - Vector3::new(t, 0.5 * t, 0.0)).norm() < 8e-4);
+            assert!((got.rotation.angle() - 0.4 * t).abs() < 8e-4, "t = {t}");
+        }
     }
 
     #[test]
@@ -980,6 +1028,24 @@ mod tests {
         assert!(matches!(
             PerDimSplinePoses::<f64>::from_samples(range(), 5, &[0.5, 1.0, 9.0], &poses),
             Err(PoseFieldError::OutOfRange { .. })
+        ));
+    }
+
+    #[test]
+    fn backward_checks_buffer_lengths() {
+        let mut s = LieSplinePoses::<f64>::with_num_knots(range(), 5).unwrap();
+        let mut out = PoseBatch::default();
+        s.forward(&[1.0], Order::Velocity, &mut out).unwrap();
+        let g = PoseBatch::zeros(1, Order::Velocity);
+        let mut short = vec![0.0; 7];
+        assert!(matches!(
+            s.backward(&[1.0], &g, &mut short),
+            Err(PoseFieldError::Shape { .. })
+        ));
+        let mut grad = vec![0.0; s.num_params()];
+        assert!(matches!(
+            s.backward(&[1.0, 2.0], &g, &mut grad),
+            Err(PoseFieldError::Shape { .. })
         ));
     }
 
