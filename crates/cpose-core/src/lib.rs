@@ -29,7 +29,9 @@ pub use geometry::{
     so3_r3_exp, so3_r3_log, specific_force_body, vee,
 };
 pub use pose_field::{
-    Composed, PoseNet, PoseNetConfig, Order, ParamKind, PoseBatch, PoseField, PoseFieldError, SinusoidMotion,
+    Composed, DiscretePoses, DiscretePosesConfig, LieSplinePoses, Order, ParamKind,
+    PerDimSplinePoses, PoseBatch, PoseField, PoseFieldError, PoseNet, PoseNetConfig,
+    SinusoidMotion, SplineConfig, SplineKind, SplinePoses,
 };
 pub use real::Real;
 pub use registry::{FieldContext, PoseFieldSpec, Task, TaskInput};

@@ -147,10 +147,11 @@ fn quat_diff(a: &Quaternion<f64>, b: &Quaternion<f64>, h: f64) -> Quaternion<f64
 fn check_time_derivatives(field: &dyn PoseField<f64>, times: &[f64], tol: &Tolerances) {
     let range = field.time_range();
     let h = 1e-4 * range.duration_secs();
-    // Shift times near the ends so that t ± h stays inside.
+    // Shift times near the ends so that t ± h stays inside; the margin is 2h, not h, because
+    // `(start + h) − h` can round to just below `start` (e.g. start = 0.5).
     let centre: Vec<f64> = times
         .iter()
-        .map(|&t| t.clamp(range.start_secs + h, range.end_secs - h))
+        .map(|&t| t.clamp(range.start_secs + 2.0 * h, range.end_secs - 2.0 * h))
         .collect();
     let plus: Vec<f64> = centre.iter().map(|t| t + h).collect();
     let minus: Vec<f64> = centre.iter().map(|t| t - h).collect();

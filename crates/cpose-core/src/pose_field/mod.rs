@@ -22,12 +22,17 @@ use thiserror::Error;
 use crate::{Real, TimeRange};
 
 pub mod composed;
+mod discrete;
+mod lie_dual;
 pub mod posenet;
 pub mod sinusoid;
+mod spline;
 
 pub use composed::Composed;
+pub use discrete::{DiscretePoses, DiscretePosesConfig};
 pub use posenet::{PoseNet, PoseNetConfig};
 pub use sinusoid::SinusoidMotion;
+pub use spline::{LieSplinePoses, PerDimSplinePoses, SplineConfig, SplineKind, SplinePoses};
 
 /// The highest time derivative an evaluation computes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
