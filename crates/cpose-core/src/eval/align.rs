@@ -149,7 +149,8 @@ pub struct BarfSim3 {
     pub s0: f64,
     /// RMS spread of the predicted centres.
     pub s1: f64,
-    /// Rotation from the predicted frame to the GT frame (after BARF's reflection fix).
+    /// Rotation from the predicted frame to the GT frame (orthonormal with determinant +1 after
+    /// BARF's reflection fix).
     pub rotation: Matrix3<f64>,
 }
 
@@ -163,7 +164,7 @@ impl BarfSim3 {
         let rotation = self.rotation * world_from_cam.rotation.to_rotation_matrix().into_inner();
         Isometry3::from_parts(
             Translation3::from(centre),
-            UnitQuaternion::from_matrix(&rotation),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation)),
         )
     }
 
@@ -177,7 +178,7 @@ impl BarfSim3 {
         let rotation = rt * world_from_cam_gt.rotation.to_rotation_matrix().into_inner();
         Isometry3::from_parts(
             Translation3::from(centre),
-            UnitQuaternion::from_matrix(&rotation),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation)),
         )
     }
 }
