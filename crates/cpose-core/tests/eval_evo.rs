@@ -226,6 +226,9 @@ fn eval_rotation_ape_and_rpe_match_evo_on_tum_fr1_xyz() {
         .map(|a| a.to_degrees())
         .collect();
     let ours = error_stats(&deg).unwrap();
+    let report = cpose_core::eval::rpe_report(&gt, &est, DEFAULT_MAX_DIFF_SECS).unwrap();
+    assert_eq!(report.rot_rmse_deg, ours.rmse);
+    assert_eq!(report.num_pairs, rel.pairs.len());
     println!(
         "RPE angle: evo rmse {:.15} deg, ours {:.15} deg, relative difference {:.1e}",
         stat(&stats, "rmse"),

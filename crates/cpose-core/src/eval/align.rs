@@ -149,7 +149,8 @@ pub struct BarfSim3 {
     pub s0: f64,
     /// RMS spread of the predicted centres.
     pub s1: f64,
-    /// Rotation from the predicted frame to the GT frame (after BARF's reflection fix).
+    /// Rotation from the predicted frame to the GT frame (orthonormal with determinant +1 after
+    /// BARF's reflection fix).
     pub rotation: Matrix3<f64>,
 }
 
@@ -163,7 +164,7 @@ impl BarfSim3 {
         let rotation = self.rotation * world_from_cam.rotation.to_rotation_matrix().into_inner();
         Isometry3::from_parts(
             Translation3::from(centre),
-            UnitQuaternion::from_matrix(&rotation),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation)),
         )
     }
 
@@ -177,7 +178,7 @@ impl BarfSim3 {
         let rotation = rt * world_from_cam_gt.rotation.to_rotation_matrix().into_inner();
         Isometry3::from_parts(
             Translation3::from(centre),
-            UnitQuaternion::from_matrix(&rotation),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation)),
         )
     }
 }
@@ -436,6 +437,37 @@ mod tests {
             assert!((back.translation.vector - p.translation.vector).norm() < 1e-12);
             assert!(back.rotation.angle_to(&p.rotation) < 1e-7);
         }
+    }
+
+    #[test]
+    fn barf_errors_of_one_rotated_camera() {
+        // Same centres (so the Procrustes similarity is the identity), camera 3 turned by 10°
+        // about its own z axis. By hand: e_R = 10° for camera 3, the clamp floor elsewhere;
+        // e_t = ‖R_w2c,al·c − R_w2c,gt·c‖ = ‖(Rz(10°)ᵀ − I)·R_gtᵀ·c‖ = 2·sin(5°)·‖c_xy in cam‖.
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        let gt = random_poses(&mut rng, 8);
+        let mut pred = gt.clone();
+        let turn = UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 0.0, 10f64.to_radians()));
+        pred[3].rotation *= turn;
+        let errors = barf_pose_errors(&gt, &pred).unwrap();
+        assert!((errors.alignment.rotation - Matrix3::identity()).norm() < 1e-12);
+        let floor = (1.0_f64 - 1e-7).acos().to_degrees();
+        let c_in_cam = gt[3].rotation.inverse() * gt[3].translation.vector;
+        let expected_t = 2.0 * 5f64.to_radians().sin() * c_in_cam.xy().norm();
+        for k in 0..8 {
+            let (r, t) = (
+                errors.rot_err_deg_per_frame[k],
+                errors.trans_err_per_frame[k],
+            );
+            if k == 3 {
+                assert!((r - 10.0).abs() < 1e-9, "{r}");
+                assert!((t - expected_t).abs() < 1e-12, "{t} vs {expected_t}");
+            } else {
+                assert!((r - floor).abs() < 1e-6 && t < 1e-12, "{k}: {r} {t}");
+            }
+        }
+        assert!((errors.rot_err_deg - (10.0 + 7.0 * floor) / 8.0).abs() < 1e-6);
+        assert!((errors.trans_err - expected_t / 8.0).abs() < 1e-12);
     }
 
     #[test]

@@ -233,6 +233,60 @@ pub fn ate(
     })
 }
 
+/// Result of [`rpe_report`]: evo's RPE statistics over consecutive associated poses (delta 1
+/// frame), translation part in metres (the trajectories' unit) and rotation angle in degrees.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RpeReport {
+    /// RMSE of the relative translation errors.
+    pub trans_rmse_m: f64,
+    /// Mean of the relative translation errors.
+    pub trans_mean_m: f64,
+    /// Median of the relative translation errors.
+    pub trans_median_m: f64,
+    /// Largest relative translation error.
+    pub trans_max_m: f64,
+    /// RMSE of the relative rotation angles.
+    pub rot_rmse_deg: f64,
+    /// Mean of the relative rotation angles.
+    pub rot_mean_deg: f64,
+    /// Median of the relative rotation angles.
+    pub rot_median_deg: f64,
+    /// Largest relative rotation angle.
+    pub rot_max_deg: f64,
+    /// Number of pose pairs compared.
+    pub num_pairs: usize,
+}
+
+/// Relative pose error as `evo_rpe tum GT EST --delta 1 --delta_unit f --t_max_diff max_diff_secs`
+/// (`-r trans_part` and `-r angle_deg`): association ([`associate`]`(gt, est, max_diff_secs)`),
+/// then [`rpe`] with a delta of 1 frame. No alignment: RPE is invariant to a rigid change of frame.
+pub fn rpe_report(
+    gt: &Trajectory,
+    est: &Trajectory,
+    max_diff_secs: f64,
+) -> Result<RpeReport, EvalError> {
+    let (reference, estimate) = associate(gt, est, max_diff_secs)?.poses(gt, est);
+    let errors = rpe(&reference, &estimate, 1)?;
+    let trans = error_stats(&errors.translation)?;
+    let deg: Vec<f64> = errors
+        .rotation_angle_rad
+        .iter()
+        .map(|a| a.to_degrees())
+        .collect();
+    let rot = error_stats(&deg)?;
+    Ok(RpeReport {
+        trans_rmse_m: trans.rmse,
+        trans_mean_m: trans.mean,
+        trans_median_m: trans.median,
+        trans_max_m: trans.max,
+        rot_rmse_deg: rot.rmse,
+        rot_mean_deg: rot.mean,
+        rot_median_deg: rot.median,
+        rot_max_deg: rot.max,
+        num_pairs: errors.pairs.len(),
+    })
+}
+
 /// Aligns associated `estimate` poses onto `reference` poses (evo `PosePath3D.align`): the
 /// Umeyama similarity of the positions ([`Alignment::None`]: the identity), and the estimate with
 /// it applied to every pose (positions and orientations, scale on positions).
