@@ -392,7 +392,7 @@ impl Fit<'_> {
         let mut imu_order = self.imu_order.clone();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut cursor = imu_order.len();
-        let decay = |lr: f64| ExponentialDecay { lr_start: lr, lr_end: lr * self.cfg.lr_decay, steps: iterations as u64 };
+        let decay = |lr: f64| ExponentialDecay { lr0: lr, lr_end: lr * self.cfg.lr_decay, max_iter: iterations as u64 };
         let (lr_t, lr_r, lr_p) = (decay(self.cfg.lr_translation), decay(self.cfg.lr_rotation), decay(self.cfg.lr_pose));
         let g = gravity_world();
         let mut loss = f64::NAN;

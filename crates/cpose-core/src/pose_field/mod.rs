@@ -21,6 +21,7 @@ use thiserror::Error;
 
 use crate::{Real, TimeRange};
 
+mod builtin;
 pub mod composed;
 mod discrete;
 mod lie_dual;
