@@ -271,32 +271,54 @@ pub(crate) fn pullback<const N: usize>(
     cot: &PoseBatch,
     i: usize,
 ) -> [f64; N] {
-    let mut g = [0.0; N];
-    let mut add = |d: &DualSVec64<N>, c: f64| {
-        if c != 0.0 {
-            let e = d.eps.unwrap_generic(Const::<N>, U1);
-            for k in 0..N {
-                g[k] += c * e[k];
-            }
-        }
-    };
-    let quats = [&cot.rotation, &cot.rotation_rate, &cot.rotation_acc];
-    let vecs = [&cot.translation, &cot.lin_vel_world, &cot.lin_acc_world];
+    let mut g = pullback_rotation(&jet.q, cot, i);
+    let cp = translation_cotangent(cot, i);
     for order in 0..3 {
-        if let Some(c) = quats[order].get(i) {
-            let q = &jet.q[order];
-            add(&q.w, c.w);
-            add(&q.x, c.i);
-            add(&q.y, c.j);
-            add(&q.z, c.k);
-        }
-        if let Some(c) = vecs[order].get(i) {
-            for a in 0..3 {
-                add(&jet.p[order][a], c[a]);
-            }
+        for a in 0..3 {
+            add_scaled_eps(&mut g, &jet.p[order][a], cp[order][a]);
         }
     }
     g
+}
+
+/// As [`pullback`] for the rotation outputs `q, q̇, q̈` only.
+pub(crate) fn pullback_rotation<const N: usize>(
+    q: &[Quat<DualSVec64<N>>; 3],
+    cot: &PoseBatch,
+    i: usize,
+) -> [f64; N] {
+    let mut g = [0.0; N];
+    let quats = [&cot.rotation, &cot.rotation_rate, &cot.rotation_acc];
+    for order in 0..3 {
+        if let Some(c) = quats[order].get(i) {
+            let q = &q[order];
+            add_scaled_eps(&mut g, &q.w, c.w);
+            add_scaled_eps(&mut g, &q.x, c.i);
+            add_scaled_eps(&mut g, &q.y, c.j);
+            add_scaled_eps(&mut g, &q.z, c.k);
+        }
+    }
+    g
+}
+
+/// The cotangents of `p, ṗ, p̈` at entry `i` (zero where absent).
+pub(crate) fn translation_cotangent(cot: &PoseBatch, i: usize) -> [Vector3<f64>; 3] {
+    let get = |v: &Vec<Vector3<f64>>| v.get(i).copied().unwrap_or_else(Vector3::zeros);
+    [
+        get(&cot.translation),
+        get(&cot.lin_vel_world),
+        get(&cot.lin_acc_world),
+    ]
+}
+
+/// `g += c · ∂d/∂θ`.
+fn add_scaled_eps<const N: usize>(g: &mut [f64; N], d: &DualSVec64<N>, c: f64) {
+    if c != 0.0 {
+        let e = d.eps.unwrap_generic(Const::<N>, U1);
+        for k in 0..N {
+            g[k] += c * e[k];
+        }
+    }
 }
 
 #[cfg(test)]

@@ -295,12 +295,19 @@ fn per_dim_jet<D: Scalar>(theta: &[D; LOCAL], basis: &BasisJet) -> Jet<D> {
     };
     let r: V3<Dual2<D>> =
         std::array::from_fn(|c| lie_dual::jet2(channel(c, 0), channel(c, 1), channel(c, 2)));
-    let q = lie_dual::exp_rotvec(&r);
     Jet {
-        q: Jet::quat_from_dual2(&q),
+        q: rotation_from_rotvec_jet(&r),
         p: std::array::from_fn(|order| std::array::from_fn(|c| channel(3 + c, order))),
     }
 }
+
+/// `q, q̇, q̈` of `q = exp(r/2)` from `r, ṙ, r̈` (exact chain rule through [`Dual2`] numbers).
+fn rotation_from_rotvec_jet<D: Scalar>(r: &V3<Dual2<D>>) -> [Quat<D>; 3] {
+    Jet::quat_from_dual2(&lie_dual::exp_rotvec(r))
+}
+
+/// Width of the rotation Jacobian of the per-dimension spline: `(r, ṙ, r̈)` at `t`.
+const ROT_JET: usize = 9;
 
 impl<S: Real> PoseField<S> for PerDimSplinePoses<S> {
     fn time_range(&self) -> TimeRange {
@@ -335,8 +342,10 @@ impl<S: Real> PoseField<S> for PerDimSplinePoses<S> {
         Ok(())
     }
 
-    /// Stateless: recomputes each evaluation with `DualSVec64<24>` control values and
-    /// accumulates `Jᵀ · cotangent`.
+    /// Stateless: recomputes each evaluation. The translation is linear in the control values
+    /// (`∂p^{(d)}/∂p_k = N_k^{(d)}`); the rotation is differentiated by forward-mode AD with
+    /// respect to the 9 values `(r, ṙ, r̈)` at `t` (`DualSVec64<9>`) and chained through
+    /// `∂r^{(d)}/∂r_k = N_k^{(d)}`.
     fn backward(
         &mut self,
         times_secs: &[f64],
@@ -348,11 +357,29 @@ impl<S: Real> PoseField<S> for PerDimSplinePoses<S> {
         check_grad_len(param_grad.len(), self.ctrl.len())?;
         for (n, &t) in times_secs.iter().enumerate() {
             let (first, basis) = self.basis(t);
-            let theta: [DualSVec64<LOCAL>; LOCAL] =
-                lie_dual::seed(&local_params(&self.ctrl, first));
-            let g = lie_dual::pullback(&per_dim_jet(&theta, &basis), grad, n);
-            for k in 0..LOCAL {
-                param_grad[PER_CONTROL * first + k] += S::from_f64(g[k]);
+            let theta = local_params(&self.ctrl, first);
+            let rjet: [f64; ROT_JET] = std::array::from_fn(|k| {
+                let (order, c) = (k / 3, k % 3);
+                (0..SUPPORT).fold(0.0, |acc, o| {
+                    acc + theta[PER_CONTROL * o + c] * basis[order][o]
+                })
+            });
+            let x: [DualSVec64<ROT_JET>; ROT_JET] = lie_dual::seed(&rjet);
+            let r: V3<Dual2<DualSVec64<ROT_JET>>> =
+                std::array::from_fn(|c| lie_dual::jet2(x[c], x[3 + c], x[6 + c]));
+            let g_rot = lie_dual::pullback_rotation(&rotation_from_rotvec_jet(&r), grad, n);
+            let g_p = lie_dual::translation_cotangent(grad, n);
+            for o in 0..SUPPORT {
+                let base = PER_CONTROL * (first + o);
+                for c in 0..3 {
+                    let (mut gr, mut gp) = (0.0, 0.0);
+                    for order in 0..3 {
+                        gr += basis[order][o] * g_rot[3 * order + c];
+                        gp += basis[order][o] * g_p[order][c];
+                    }
+                    param_grad[base + c] += S::from_f64(gr);
+                    param_grad[base + 3 + c] += S::from_f64(gp);
+                }
             }
         }
         Ok(())
