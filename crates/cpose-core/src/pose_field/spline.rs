@@ -103,6 +103,14 @@ fn set_control<S: Real>(ctrl: &mut [S], k: usize, r: &Vector3<f64>, p: &Vector3<
     }
 }
 
+/// Rotation-vector values of the 4 local control points.
+const ROT_LOCAL: usize = 3 * SUPPORT;
+
+/// Local control point `k`'s rotation vector (`offset = 0`) or translation (`offset = 3`).
+fn local_vec(theta: &[f64; LOCAL], k: usize, offset: usize) -> V3<f64> {
+    std::array::from_fn(|a| theta[PER_CONTROL * k + offset + a])
+}
+
 /// The 24 parameters of control points `first..first + 4` in `f64`.
 fn local_params<S: Real>(ctrl: &[S], first: usize) -> [f64; LOCAL] {
     std::array::from_fn(|k| ctrl[PER_CONTROL * first + k].to_f64())
@@ -522,19 +530,19 @@ fn cumulative_basis(u: f64, inv_dt: f64) -> [[f64; 3]; 3] {
     ]
 }
 
-/// The pose jet of the cumulative spline from the 4 local control poses `θ` and the basis.
-fn lie_jet<D: Scalar>(theta: &[D; LOCAL], lambda: &[[f64; 3]; 3]) -> Jet<D> {
-    let r = |k: usize| -> V3<D> { std::array::from_fn(|a| theta[PER_CONTROL * k + a]) };
-    let p = |k: usize| -> V3<D> { std::array::from_fn(|a| theta[PER_CONTROL * k + 3 + a]) };
-    let q: [Quat<D>; SUPPORT] = std::array::from_fn(|k| lie_dual::exp_rotvec(&r(k)));
+/// `q, q̇, q̈` of the cumulative spline from the rotation vectors `r_k` of the 4 local control
+/// rotations and the cumulative basis (product rule over the exp factors, see
+/// [`LieSplinePoses`]).
+fn lie_rotation<D: Scalar>(r: &[V3<D>; SUPPORT], lambda: &[[f64; 3]; 3]) -> [Quat<D>; 3] {
+    let q: [Quat<D>; SUPPORT] = std::array::from_fn(|k| lie_dual::exp_rotvec(&r[k]));
     let zero = Quat::pure([D::zero(); 3]);
     // (A, Ȧ, Ä) starts at the constant q_0 and is multiplied by each factor (E, Ė, Ë):
     // (AE)' = ȦE + AĖ, (AE)'' = ÄE + 2ȦĖ + AË.
     let mut acc = [q[0], zero, zero];
-    let mut pos = [p(0), [D::zero(); 3], [D::zero(); 3]];
     for j in 1..SUPPORT {
         let phi = lie_dual::log_rotvec(&q[j - 1].conj().mul(&q[j]));
         let (l, ld, ldd) = (lambda[0][j - 1], lambda[1][j - 1], lambda[2][j - 1]);
+        // E = exp(λφ/2), Ė = E ⊗ (0, λ̇φ/2), Ë = E ⊗ (−λ̇²|φ/2|², λ̈φ/2) (E commutes with φ).
         let e = lie_dual::exp_rotvec(&lie_dual::scale3(&phi, D::from(l)));
         let half_phi = lie_dual::scale3(&phi, D::from(0.5));
         let e1 = e.mul(&Quat::pure(lie_dual::scale3(&half_phi, D::from(ld))));
@@ -550,15 +558,28 @@ fn lie_jet<D: Scalar>(theta: &[D; LOCAL], lambda: &[[f64; 3]; 3]) -> Jet<D> {
                 .add(&a1.mul(&e1).scale(D::from(2.0)))
                 .add(&a0.mul(&e2)),
         ];
-        let (pj, pprev) = (p(j), p(j - 1));
-        for a in 0..3 {
-            let dp = pj[a] - pprev[a];
-            pos[0][a] += dp * l;
-            pos[1][a] += dp * ld;
-            pos[2][a] += dp * ldd;
-        }
     }
-    Jet { q: acc, p: pos }
+    acc
+}
+
+/// Weights `w[d][k]` of the local control translations in `p^{(d)}`:
+/// `p = p_0 + Σ_j λ̃_j (p_j − p_{j−1}) = Σ_k (λ̃_k − λ̃_{k+1}) p_k` with `λ̃_0 = 1`, `λ̃_4 = 0`
+/// (and `λ̃_0` contributes nothing to the derivatives).
+fn translation_weights(lambda: &[[f64; 3]; 3]) -> [[f64; SUPPORT]; 3] {
+    std::array::from_fn(|d| {
+        let l = |k: usize| match k {
+            0 => {
+                if d == 0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            1..=3 => lambda[d][k - 1],
+            _ => 0.0,
+        };
+        std::array::from_fn(|k| l(k) - l(k + 1))
+    })
 }
 
 impl<S: Real> PoseField<S> for LieSplinePoses<S> {
@@ -589,14 +610,27 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
         let inv_dt = 1.0 / self.dt_secs;
         for (n, &t) in times_secs.iter().enumerate() {
             let (s, u) = self.segment(t);
-            let jet = lie_jet(&local_params(&self.ctrl, s), &cumulative_basis(u, inv_dt));
+            let lambda = cumulative_basis(u, inv_dt);
+            let theta = local_params(&self.ctrl, s);
+            let r = std::array::from_fn(|k| local_vec(&theta, k, 0));
+            let w = translation_weights(&lambda);
+            let p = std::array::from_fn(|d| {
+                std::array::from_fn(|a| {
+                    (0..SUPPORT).fold(0.0, |acc, k| acc + w[d][k] * local_vec(&theta, k, 3)[a])
+                })
+            });
+            let jet = Jet {
+                q: lie_rotation(&r, &lambda),
+                p,
+            };
             lie_dual::write_jet(out, n, &jet);
         }
         Ok(())
     }
 
-    /// Stateless: recomputes each evaluation with `DualSVec64<24>` control values and
-    /// accumulates `Jᵀ · cotangent`.
+    /// Stateless: recomputes each evaluation. The rotation is differentiated by forward-mode
+    /// AD over the 12 local rotation-vector values (`DualSVec64<12>`); the translation is linear
+    /// in the control translations ([`translation_weights`]).
     fn backward(
         &mut self,
         times_secs: &[f64],
@@ -609,10 +643,21 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
         let inv_dt = 1.0 / self.dt_secs;
         for (n, &t) in times_secs.iter().enumerate() {
             let (s, u) = self.segment(t);
-            let theta: [DualSVec64<LOCAL>; LOCAL] = lie_dual::seed(&local_params(&self.ctrl, s));
-            let g = lie_dual::pullback(&lie_jet(&theta, &cumulative_basis(u, inv_dt)), grad, n);
-            for k in 0..LOCAL {
-                param_grad[PER_CONTROL * s + k] += S::from_f64(g[k]);
+            let lambda = cumulative_basis(u, inv_dt);
+            let theta = local_params(&self.ctrl, s);
+            let rot: [f64; ROT_LOCAL] = std::array::from_fn(|k| local_vec(&theta, k / 3, 0)[k % 3]);
+            let x: [DualSVec64<ROT_LOCAL>; ROT_LOCAL] = lie_dual::seed(&rot);
+            let r = std::array::from_fn(|k| [x[3 * k], x[3 * k + 1], x[3 * k + 2]]);
+            let g_rot = lie_dual::pullback_rotation(&lie_rotation(&r, &lambda), grad, n);
+            let g_p = lie_dual::translation_cotangent(grad, n);
+            let w = translation_weights(&lambda);
+            for k in 0..SUPPORT {
+                let base = PER_CONTROL * (s + k);
+                for a in 0..3 {
+                    param_grad[base + a] += S::from_f64(g_rot[3 * k + a]);
+                    let gp = (0..3).fold(0.0, |acc, d| acc + w[d][k] * g_p[d][a]);
+                    param_grad[base + 3 + a] += S::from_f64(gp);
+                }
             }
         }
         Ok(())
