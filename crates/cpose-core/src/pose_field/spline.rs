@@ -568,13 +568,7 @@ fn lie_rotation<D: Scalar>(r: &[V3<D>; SUPPORT], lambda: &[[f64; 3]; 3]) -> [Qua
 fn translation_weights(lambda: &[[f64; 3]; 3]) -> [[f64; SUPPORT]; 3] {
     std::array::from_fn(|d| {
         let l = |k: usize| match k {
-            0 => {
-                if d == 0 {
-                    1.0
-                } else {
-                    0.0
-                }
-            }
+            0 if d == 0 => 1.0,
             1..=3 => lambda[d][k - 1],
             _ => 0.0,
         };
