@@ -63,6 +63,16 @@ impl<D: Scalar> Quat<D> {
         }
     }
 
+    /// The identity `(1, 0, 0, 0)`.
+    pub fn identity() -> Self {
+        Self {
+            w: D::one(),
+            x: D::zero(),
+            y: D::zero(),
+            z: D::zero(),
+        }
+    }
+
     /// A constant quaternion.
     pub fn constant(q: &Quaternion<f64>) -> Self {
         Self {
@@ -287,18 +297,34 @@ pub(crate) fn pullback_rotation<const N: usize>(
     cot: &PoseBatch,
     i: usize,
 ) -> [f64; N] {
+    pullback_quats(q, &rotation_cotangent(cot, i))
+}
+
+/// `Σ_d ⟨c_d, ∂q^{(d)}/∂θ⟩` for quaternions `q^{(d)}` of dual numbers.
+pub(crate) fn pullback_quats<const N: usize>(
+    q: &[Quat<DualSVec64<N>>; 3],
+    c: &[Quaternion<f64>; 3],
+) -> [f64; N] {
     let mut g = [0.0; N];
-    let quats = [&cot.rotation, &cot.rotation_rate, &cot.rotation_acc];
     for order in 0..3 {
-        if let Some(c) = quats[order].get(i) {
-            let q = &q[order];
-            add_scaled_eps(&mut g, &q.w, c.w);
-            add_scaled_eps(&mut g, &q.x, c.i);
-            add_scaled_eps(&mut g, &q.y, c.j);
-            add_scaled_eps(&mut g, &q.z, c.k);
-        }
+        let (q, c) = (&q[order], &c[order]);
+        add_scaled_eps(&mut g, &q.w, c.w);
+        add_scaled_eps(&mut g, &q.x, c.i);
+        add_scaled_eps(&mut g, &q.y, c.j);
+        add_scaled_eps(&mut g, &q.z, c.k);
     }
     g
+}
+
+/// The cotangents of `q, q̇, q̈` at entry `i` (zero where absent).
+pub(crate) fn rotation_cotangent(cot: &PoseBatch, i: usize) -> [Quaternion<f64>; 3] {
+    let zero = Quaternion::new(0.0, 0.0, 0.0, 0.0);
+    let get = |v: &Vec<Quaternion<f64>>| v.get(i).copied().unwrap_or(zero);
+    [
+        get(&cot.rotation),
+        get(&cot.rotation_rate),
+        get(&cot.rotation_acc),
+    ]
 }
 
 /// The cotangents of `p, ṗ, p̈` at entry `i` (zero where absent).

@@ -6,7 +6,7 @@
 //! forward-mode automatic differentiation over the 4 control points (24 values) that one
 //! evaluation depends on.
 
-use nalgebra::{DMatrix, Isometry3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, Isometry3, Quaternion, UnitQuaternion, Vector3};
 use num_dual::{Dual2, DualSVec64};
 use serde::{Deserialize, Serialize};
 
@@ -431,6 +431,8 @@ pub struct LieSplinePoses<S: Real = f32> {
     range: TimeRange,
     dt_secs: f64,
     ctrl: Vec<S>,
+    /// Scratch of [`PoseField::backward`]: per-segment Jacobians, rebuilt on every call.
+    segment_cache: Vec<Option<SegmentJacobian>>,
 }
 
 impl<S: Real> LieSplinePoses<S> {
@@ -445,6 +447,7 @@ impl<S: Real> LieSplinePoses<S> {
             range,
             dt_secs: range.duration_secs() / (num_control_points - DEGREE) as f64,
             ctrl: vec![S::ZERO; PER_CONTROL * num_control_points],
+            segment_cache: Vec::new(),
         })
     }
 
@@ -530,21 +533,26 @@ fn cumulative_basis(u: f64, inv_dt: f64) -> [[f64; 3]; 3] {
     ]
 }
 
-/// `q, q̇, q̈` of the cumulative spline from the rotation vectors `r_k` of the 4 local control
-/// rotations and the cumulative basis (product rule over the exp factors, see
-/// [`LieSplinePoses`]).
-fn lie_rotation<D: Scalar>(r: &[V3<D>; SUPPORT], lambda: &[[f64; 3]; 3]) -> [Quat<D>; 3] {
+/// The per-segment quantities of the cumulative spline's rotation: `q_0 = exp(r_0/2)` and
+/// `φ_j = log(q_{j−1}* ⊗ q_j)`, j = 1..3, from the rotation vectors of the 4 local controls.
+fn lie_segment<D: Scalar>(r: &[V3<D>; SUPPORT]) -> (Quat<D>, [V3<D>; 3]) {
     let q: [Quat<D>; SUPPORT] = std::array::from_fn(|k| lie_dual::exp_rotvec(&r[k]));
+    let phi = std::array::from_fn(|j| lie_dual::log_rotvec(&q[j].conj().mul(&q[j + 1])));
+    (q[0], phi)
+}
+
+/// `R, Ṙ, R̈` of the relative rotation `R(u) = Π_{j=1..3} exp(λ̃_j(u) φ_j / 2)`, so that
+/// `q^{(d)} = q_0 ⊗ R^{(d)}` (product rule over the exp factors, see [`LieSplinePoses`]).
+fn lie_relative<D: Scalar>(phi: &[V3<D>; 3], lambda: &[[f64; 3]; 3]) -> [Quat<D>; 3] {
     let zero = Quat::pure([D::zero(); 3]);
-    // (A, Ȧ, Ä) starts at the constant q_0 and is multiplied by each factor (E, Ė, Ë):
+    // (A, Ȧ, Ä) starts at the identity and is multiplied by each factor (E, Ė, Ë):
     // (AE)' = ȦE + AĖ, (AE)'' = ÄE + 2ȦĖ + AË.
-    let mut acc = [q[0], zero, zero];
-    for j in 1..SUPPORT {
-        let phi = lie_dual::log_rotvec(&q[j - 1].conj().mul(&q[j]));
-        let (l, ld, ldd) = (lambda[0][j - 1], lambda[1][j - 1], lambda[2][j - 1]);
+    let mut acc = [Quat::identity(), zero, zero];
+    for j in 0..3 {
+        let (l, ld, ldd) = (lambda[0][j], lambda[1][j], lambda[2][j]);
         // E = exp(λφ/2), Ė = E ⊗ (0, λ̇φ/2), Ë = E ⊗ (−λ̇²|φ/2|², λ̈φ/2) (E commutes with φ).
-        let e = lie_dual::exp_rotvec(&lie_dual::scale3(&phi, D::from(l)));
-        let half_phi = lie_dual::scale3(&phi, D::from(0.5));
+        let e = lie_dual::exp_rotvec(&lie_dual::scale3(&phi[j], D::from(l)));
+        let half_phi = lie_dual::scale3(&phi[j], D::from(0.5));
         let e1 = e.mul(&Quat::pure(lie_dual::scale3(&half_phi, D::from(ld))));
         let e2 = e.mul(&Quat::from_parts(
             -lie_dual::dot(&half_phi, &half_phi) * (ld * ld),
@@ -560,6 +568,67 @@ fn lie_rotation<D: Scalar>(r: &[V3<D>; SUPPORT], lambda: &[[f64; 3]; 3]) -> [Qua
         ];
     }
     acc
+}
+
+/// Inputs of the per-time rotation: `q_0` (4 components `w, x, y, z`) then `φ_1, φ_2, φ_3`.
+const SEG_OUT: usize = 4 + 9;
+
+/// `∂(q_0, φ_1..3)/∂(r_0..r_3)`, `SEG_OUT × 12`, row-major, with the values `(q_0, φ)`.
+#[derive(Clone, Copy, Debug)]
+struct SegmentJacobian {
+    q0: Quaternion<f64>,
+    phi: [V3<f64>; 3],
+    d_in_d_r: [[f64; ROT_LOCAL]; SEG_OUT],
+}
+
+impl SegmentJacobian {
+    fn new(theta: &[f64; LOCAL]) -> Self {
+        let rot: [f64; ROT_LOCAL] = std::array::from_fn(|k| local_vec(theta, k / 3, 0)[k % 3]);
+        let x: [DualSVec64<ROT_LOCAL>; ROT_LOCAL] = lie_dual::seed(&rot);
+        let r = std::array::from_fn(|k| [x[3 * k], x[3 * k + 1], x[3 * k + 2]]);
+        let (q0, phi) = lie_segment(&r);
+        let outs = [
+            q0.w, q0.x, q0.y, q0.z, phi[0][0], phi[0][1], phi[0][2], phi[1][0], phi[1][1],
+            phi[1][2], phi[2][0], phi[2][1], phi[2][2],
+        ];
+        let d_in_d_r = std::array::from_fn(|o| {
+            let e = outs[o]
+                .eps
+                .unwrap_generic(nalgebra::Const::<ROT_LOCAL>, nalgebra::U1);
+            std::array::from_fn(|k| e[k])
+        });
+        Self {
+            q0: Quaternion::new(q0.w.re, q0.x.re, q0.y.re, q0.z.re),
+            phi: std::array::from_fn(|j| std::array::from_fn(|a| phi[j][a].re)),
+            d_in_d_r,
+        }
+    }
+
+    /// `∂L/∂r` (12) from the rotation cotangents `c_d` of `q^{(d)} = q_0 ⊗ R^{(d)}` at one time:
+    /// `∂L/∂q_0 = Σ_d c_d ⊗ R^{(d)}*`, `∂L/∂R^{(d)} = q_0* ⊗ c_d`, the latter pulled back to `φ`
+    /// by forward-mode AD (`DualSVec64<9>`), then both through `∂(q_0, φ)/∂r`.
+    fn pullback(&self, lambda: &[[f64; 3]; 3], c: &[Quaternion<f64>; 3]) -> [f64; ROT_LOCAL] {
+        let x: [DualSVec64<9>; 9] =
+            lie_dual::seed(&std::array::from_fn(|k| self.phi[k / 3][k % 3]));
+        let phi = std::array::from_fn(|j| [x[3 * j], x[3 * j + 1], x[3 * j + 2]]);
+        let rel = lie_relative(&phi, lambda);
+        let rel_re: [Quaternion<f64>; 3] = std::array::from_fn(|d| {
+            Quaternion::new(rel[d].w.re, rel[d].x.re, rel[d].y.re, rel[d].z.re)
+        });
+        let c_rel: [Quaternion<f64>; 3] = std::array::from_fn(|d| self.q0.conjugate() * c[d]);
+        let g_phi = lie_dual::pullback_quats(&rel, &c_rel);
+        let g_q0 = (0..3).fold(Quaternion::new(0.0, 0.0, 0.0, 0.0), |acc, d| {
+            acc + c[d] * rel_re[d].conjugate()
+        });
+        let g_in: [f64; SEG_OUT] = std::array::from_fn(|o| match o {
+            0 => g_q0.w,
+            1 => g_q0.i,
+            2 => g_q0.j,
+            3 => g_q0.k,
+            _ => g_phi[o - 4],
+        });
+        std::array::from_fn(|k| (0..SEG_OUT).map(|o| self.d_in_d_r[o][k] * g_in[o]).sum())
+    }
 }
 
 /// Weights `w[d][k]` of the local control translations in `p^{(d)}`:
@@ -613,8 +682,10 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
                     (0..SUPPORT).fold(0.0, |acc, k| acc + w[d][k] * local_vec(&theta, k, 3)[a])
                 })
             });
+            let (q0, phi) = lie_segment(&r);
+            let rel = lie_relative(&phi, &lambda);
             let jet = Jet {
-                q: lie_rotation(&r, &lambda),
+                q: std::array::from_fn(|d| q0.mul(&rel[d])),
                 p,
             };
             lie_dual::write_jet(out, n, &jet);
@@ -622,9 +693,10 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
         Ok(())
     }
 
-    /// Stateless: recomputes each evaluation. The rotation is differentiated by forward-mode
-    /// AD over the 12 local rotation-vector values (`DualSVec64<12>`); the translation is linear
-    /// in the control translations ([`translation_weights`]).
+    /// Recomputes each evaluation (no state from `forward`). The rotation is differentiated in
+    /// two stages: per segment (cached for the call) `∂(q_0, φ)/∂r` by forward-mode AD over the
+    /// 12 local rotation-vector values, per time `∂q/∂(q_0, φ)` (see `SegmentJacobian`); the
+    /// translation is linear in the control translations ([`translation_weights`]).
     fn backward(
         &mut self,
         times_secs: &[f64],
@@ -635,14 +707,15 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
         grad.check_shape(times_secs.len(), grad.order)?;
         check_grad_len(param_grad.len(), self.ctrl.len())?;
         let inv_dt = 1.0 / self.dt_secs;
+        let mut cache = std::mem::take(&mut self.segment_cache);
+        cache.clear();
+        cache.resize(self.num_control_points() - DEGREE, None);
         for (n, &t) in times_secs.iter().enumerate() {
             let (s, u) = self.segment(t);
             let lambda = cumulative_basis(u, inv_dt);
-            let theta = local_params(&self.ctrl, s);
-            let rot: [f64; ROT_LOCAL] = std::array::from_fn(|k| local_vec(&theta, k / 3, 0)[k % 3]);
-            let x: [DualSVec64<ROT_LOCAL>; ROT_LOCAL] = lie_dual::seed(&rot);
-            let r = std::array::from_fn(|k| [x[3 * k], x[3 * k + 1], x[3 * k + 2]]);
-            let g_rot = lie_dual::pullback_rotation(&lie_rotation(&r, &lambda), grad, n);
+            let seg =
+                cache[s].get_or_insert_with(|| SegmentJacobian::new(&local_params(&self.ctrl, s)));
+            let g_rot = seg.pullback(&lambda, &lie_dual::rotation_cotangent(grad, n));
             let g_p = lie_dual::translation_cotangent(grad, n);
             let w = translation_weights(&lambda);
             for k in 0..SUPPORT {
@@ -654,6 +727,7 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
                 }
             }
         }
+        self.segment_cache = cache;
         Ok(())
     }
 }
