@@ -2,9 +2,12 @@
 //! cumulative cubic B-spline on SO(3)×R³ ([`LieSplinePoses`]), both behind [`SplinePoses`] for
 //! the registry ([`SplineConfig`]).
 //!
-//! Both evaluate exact time derivatives (no finite differences) and exact parameter gradients by
-//! forward-mode automatic differentiation over the 4 control points (24 values) that one
-//! evaluation depends on.
+//! Both evaluate exact time derivatives (no finite differences) and exact parameter gradients.
+//! One evaluation depends on 4 control points (24 values): their translations enter linearly
+//! (gradients from the basis weights), their rotation vectors through forward-mode automatic
+//! differentiation with `num-dual`, narrowed by the chain rule to the few intermediate values the
+//! rotation at one time depends on (`r, ṙ, r̈` for the per-dimension spline; `q_0, φ_1..3` for the
+//! cumulative one, whose Jacobian with respect to the controls is computed once per segment).
 
 use nalgebra::{DMatrix, Isometry3, Quaternion, UnitQuaternion, Vector3};
 use num_dual::{Dual2, DualSVec64};
