@@ -63,6 +63,16 @@ impl<D: Scalar> Quat<D> {
         }
     }
 
+    /// The identity `(1, 0, 0, 0)`.
+    pub fn identity() -> Self {
+        Self {
+            w: D::one(),
+            x: D::zero(),
+            y: D::zero(),
+            z: D::zero(),
+        }
+    }
+
     /// A constant quaternion.
     pub fn constant(q: &Quaternion<f64>) -> Self {
         Self {
@@ -271,32 +281,70 @@ pub(crate) fn pullback<const N: usize>(
     cot: &PoseBatch,
     i: usize,
 ) -> [f64; N] {
-    let mut g = [0.0; N];
-    let mut add = |d: &DualSVec64<N>, c: f64| {
-        if c != 0.0 {
-            let e = d.eps.unwrap_generic(Const::<N>, U1);
-            for k in 0..N {
-                g[k] += c * e[k];
-            }
-        }
-    };
-    let quats = [&cot.rotation, &cot.rotation_rate, &cot.rotation_acc];
-    let vecs = [&cot.translation, &cot.lin_vel_world, &cot.lin_acc_world];
+    let mut g = pullback_rotation(&jet.q, cot, i);
+    let cp = translation_cotangent(cot, i);
     for order in 0..3 {
-        if let Some(c) = quats[order].get(i) {
-            let q = &jet.q[order];
-            add(&q.w, c.w);
-            add(&q.x, c.i);
-            add(&q.y, c.j);
-            add(&q.z, c.k);
-        }
-        if let Some(c) = vecs[order].get(i) {
-            for a in 0..3 {
-                add(&jet.p[order][a], c[a]);
-            }
+        for a in 0..3 {
+            add_scaled_eps(&mut g, &jet.p[order][a], cp[order][a]);
         }
     }
     g
+}
+
+/// As [`pullback`] for the rotation outputs `q, q̇, q̈` only.
+pub(crate) fn pullback_rotation<const N: usize>(
+    q: &[Quat<DualSVec64<N>>; 3],
+    cot: &PoseBatch,
+    i: usize,
+) -> [f64; N] {
+    pullback_quats(q, &rotation_cotangent(cot, i))
+}
+
+/// `Σ_d ⟨c_d, ∂q^{(d)}/∂θ⟩` for quaternions `q^{(d)}` of dual numbers.
+pub(crate) fn pullback_quats<const N: usize>(
+    q: &[Quat<DualSVec64<N>>; 3],
+    c: &[Quaternion<f64>; 3],
+) -> [f64; N] {
+    let mut g = [0.0; N];
+    for order in 0..3 {
+        let (q, c) = (&q[order], &c[order]);
+        add_scaled_eps(&mut g, &q.w, c.w);
+        add_scaled_eps(&mut g, &q.x, c.i);
+        add_scaled_eps(&mut g, &q.y, c.j);
+        add_scaled_eps(&mut g, &q.z, c.k);
+    }
+    g
+}
+
+/// The cotangents of `q, q̇, q̈` at entry `i` (zero where absent).
+pub(crate) fn rotation_cotangent(cot: &PoseBatch, i: usize) -> [Quaternion<f64>; 3] {
+    let zero = Quaternion::new(0.0, 0.0, 0.0, 0.0);
+    let get = |v: &Vec<Quaternion<f64>>| v.get(i).copied().unwrap_or(zero);
+    [
+        get(&cot.rotation),
+        get(&cot.rotation_rate),
+        get(&cot.rotation_acc),
+    ]
+}
+
+/// The cotangents of `p, ṗ, p̈` at entry `i` (zero where absent).
+pub(crate) fn translation_cotangent(cot: &PoseBatch, i: usize) -> [Vector3<f64>; 3] {
+    let get = |v: &Vec<Vector3<f64>>| v.get(i).copied().unwrap_or_else(Vector3::zeros);
+    [
+        get(&cot.translation),
+        get(&cot.lin_vel_world),
+        get(&cot.lin_acc_world),
+    ]
+}
+
+/// `g += c · ∂d/∂θ`.
+fn add_scaled_eps<const N: usize>(g: &mut [f64; N], d: &DualSVec64<N>, c: f64) {
+    if c != 0.0 {
+        let e = d.eps.unwrap_generic(Const::<N>, U1);
+        for k in 0..N {
+            g[k] += c * e[k];
+        }
+    }
 }
 
 #[cfg(test)]

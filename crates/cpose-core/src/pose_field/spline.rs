@@ -2,11 +2,14 @@
 //! cumulative cubic B-spline on SO(3)×R³ ([`LieSplinePoses`]), both behind [`SplinePoses`] for
 //! the registry ([`SplineConfig`]).
 //!
-//! Both evaluate exact time derivatives (no finite differences) and exact parameter gradients by
-//! forward-mode automatic differentiation over the 4 control points (24 values) that one
-//! evaluation depends on.
+//! Both evaluate exact time derivatives (no finite differences) and exact parameter gradients.
+//! One evaluation depends on 4 control points (24 values): their translations enter linearly
+//! (gradients from the basis weights), their rotation vectors through forward-mode automatic
+//! differentiation with `num-dual`, narrowed by the chain rule to the few intermediate values the
+//! rotation at one time depends on (`r, ṙ, r̈` for the per-dimension spline; `q_0, φ_1..3` for the
+//! cumulative one, whose Jacobian with respect to the controls is computed once per segment).
 
-use nalgebra::{DMatrix, Isometry3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, Isometry3, Quaternion, UnitQuaternion, Vector3};
 use num_dual::{Dual2, DualSVec64};
 use serde::{Deserialize, Serialize};
 
@@ -101,6 +104,14 @@ fn set_control<S: Real>(ctrl: &mut [S], k: usize, r: &Vector3<f64>, p: &Vector3<
         ctrl[PER_CONTROL * k + a] = S::from_f64(r[a]);
         ctrl[PER_CONTROL * k + 3 + a] = S::from_f64(p[a]);
     }
+}
+
+/// Rotation-vector values of the 4 local control points.
+const ROT_LOCAL: usize = 3 * SUPPORT;
+
+/// Local control point `k`'s rotation vector (`offset = 0`) or translation (`offset = 3`).
+fn local_vec(theta: &[f64; LOCAL], k: usize, offset: usize) -> V3<f64> {
+    std::array::from_fn(|a| theta[PER_CONTROL * k + offset + a])
 }
 
 /// The 24 parameters of control points `first..first + 4` in `f64`.
@@ -295,12 +306,19 @@ fn per_dim_jet<D: Scalar>(theta: &[D; LOCAL], basis: &BasisJet) -> Jet<D> {
     };
     let r: V3<Dual2<D>> =
         std::array::from_fn(|c| lie_dual::jet2(channel(c, 0), channel(c, 1), channel(c, 2)));
-    let q = lie_dual::exp_rotvec(&r);
     Jet {
-        q: Jet::quat_from_dual2(&q),
+        q: rotation_from_rotvec_jet(&r),
         p: std::array::from_fn(|order| std::array::from_fn(|c| channel(3 + c, order))),
     }
 }
+
+/// `q, q̇, q̈` of `q = exp(r/2)` from `r, ṙ, r̈` (exact chain rule through [`Dual2`] numbers).
+fn rotation_from_rotvec_jet<D: Scalar>(r: &V3<Dual2<D>>) -> [Quat<D>; 3] {
+    Jet::quat_from_dual2(&lie_dual::exp_rotvec(r))
+}
+
+/// Width of the rotation Jacobian of the per-dimension spline: `(r, ṙ, r̈)` at `t`.
+const ROT_JET: usize = 9;
 
 impl<S: Real> PoseField<S> for PerDimSplinePoses<S> {
     fn time_range(&self) -> TimeRange {
@@ -335,8 +353,10 @@ impl<S: Real> PoseField<S> for PerDimSplinePoses<S> {
         Ok(())
     }
 
-    /// Stateless: recomputes each evaluation with `DualSVec64<24>` control values and
-    /// accumulates `Jᵀ · cotangent`.
+    /// Stateless: recomputes each evaluation. The translation is linear in the control values
+    /// (`∂p^{(d)}/∂p_k = N_k^{(d)}`); the rotation is differentiated by forward-mode AD with
+    /// respect to the 9 values `(r, ṙ, r̈)` at `t` (`DualSVec64<9>`) and chained through
+    /// `∂r^{(d)}/∂r_k = N_k^{(d)}`.
     fn backward(
         &mut self,
         times_secs: &[f64],
@@ -348,11 +368,29 @@ impl<S: Real> PoseField<S> for PerDimSplinePoses<S> {
         check_grad_len(param_grad.len(), self.ctrl.len())?;
         for (n, &t) in times_secs.iter().enumerate() {
             let (first, basis) = self.basis(t);
-            let theta: [DualSVec64<LOCAL>; LOCAL] =
-                lie_dual::seed(&local_params(&self.ctrl, first));
-            let g = lie_dual::pullback(&per_dim_jet(&theta, &basis), grad, n);
-            for k in 0..LOCAL {
-                param_grad[PER_CONTROL * first + k] += S::from_f64(g[k]);
+            let theta = local_params(&self.ctrl, first);
+            let rjet: [f64; ROT_JET] = std::array::from_fn(|k| {
+                let (order, c) = (k / 3, k % 3);
+                (0..SUPPORT).fold(0.0, |acc, o| {
+                    acc + theta[PER_CONTROL * o + c] * basis[order][o]
+                })
+            });
+            let x: [DualSVec64<ROT_JET>; ROT_JET] = lie_dual::seed(&rjet);
+            let r: V3<Dual2<DualSVec64<ROT_JET>>> =
+                std::array::from_fn(|c| lie_dual::jet2(x[c], x[3 + c], x[6 + c]));
+            let g_rot = lie_dual::pullback_rotation(&rotation_from_rotvec_jet(&r), grad, n);
+            let g_p = lie_dual::translation_cotangent(grad, n);
+            for o in 0..SUPPORT {
+                let base = PER_CONTROL * (first + o);
+                for c in 0..3 {
+                    let (mut gr, mut gp) = (0.0, 0.0);
+                    for order in 0..3 {
+                        gr += basis[order][o] * g_rot[3 * order + c];
+                        gp += basis[order][o] * g_p[order][c];
+                    }
+                    param_grad[base + c] += S::from_f64(gr);
+                    param_grad[base + 3 + c] += S::from_f64(gp);
+                }
             }
         }
         Ok(())
@@ -396,6 +434,8 @@ pub struct LieSplinePoses<S: Real = f32> {
     range: TimeRange,
     dt_secs: f64,
     ctrl: Vec<S>,
+    /// Scratch of [`PoseField::backward`]: per-segment Jacobians, rebuilt on every call.
+    segment_cache: Vec<Option<SegmentJacobian>>,
 }
 
 impl<S: Real> LieSplinePoses<S> {
@@ -410,6 +450,7 @@ impl<S: Real> LieSplinePoses<S> {
             range,
             dt_secs: range.duration_secs() / (num_control_points - DEGREE) as f64,
             ctrl: vec![S::ZERO; PER_CONTROL * num_control_points],
+            segment_cache: Vec::new(),
         })
     }
 
@@ -495,21 +536,26 @@ fn cumulative_basis(u: f64, inv_dt: f64) -> [[f64; 3]; 3] {
     ]
 }
 
-/// The pose jet of the cumulative spline from the 4 local control poses `θ` and the basis.
-fn lie_jet<D: Scalar>(theta: &[D; LOCAL], lambda: &[[f64; 3]; 3]) -> Jet<D> {
-    let r = |k: usize| -> V3<D> { std::array::from_fn(|a| theta[PER_CONTROL * k + a]) };
-    let p = |k: usize| -> V3<D> { std::array::from_fn(|a| theta[PER_CONTROL * k + 3 + a]) };
-    let q: [Quat<D>; SUPPORT] = std::array::from_fn(|k| lie_dual::exp_rotvec(&r(k)));
+/// The per-segment quantities of the cumulative spline's rotation: `q_0 = exp(r_0/2)` and
+/// `φ_j = log(q_{j−1}* ⊗ q_j)`, j = 1..3, from the rotation vectors of the 4 local controls.
+fn lie_segment<D: Scalar>(r: &[V3<D>; SUPPORT]) -> (Quat<D>, [V3<D>; 3]) {
+    let q: [Quat<D>; SUPPORT] = std::array::from_fn(|k| lie_dual::exp_rotvec(&r[k]));
+    let phi = std::array::from_fn(|j| lie_dual::log_rotvec(&q[j].conj().mul(&q[j + 1])));
+    (q[0], phi)
+}
+
+/// `R, Ṙ, R̈` of the relative rotation `R(u) = Π_{j=1..3} exp(λ̃_j(u) φ_j / 2)`, so that
+/// `q^{(d)} = q_0 ⊗ R^{(d)}` (product rule over the exp factors, see [`LieSplinePoses`]).
+fn lie_relative<D: Scalar>(phi: &[V3<D>; 3], lambda: &[[f64; 3]; 3]) -> [Quat<D>; 3] {
     let zero = Quat::pure([D::zero(); 3]);
-    // (A, Ȧ, Ä) starts at the constant q_0 and is multiplied by each factor (E, Ė, Ë):
+    // (A, Ȧ, Ä) starts at the identity and is multiplied by each factor (E, Ė, Ë):
     // (AE)' = ȦE + AĖ, (AE)'' = ÄE + 2ȦĖ + AË.
-    let mut acc = [q[0], zero, zero];
-    let mut pos = [p(0), [D::zero(); 3], [D::zero(); 3]];
-    for j in 1..SUPPORT {
-        let phi = lie_dual::log_rotvec(&q[j - 1].conj().mul(&q[j]));
-        let (l, ld, ldd) = (lambda[0][j - 1], lambda[1][j - 1], lambda[2][j - 1]);
-        let e = lie_dual::exp_rotvec(&lie_dual::scale3(&phi, D::from(l)));
-        let half_phi = lie_dual::scale3(&phi, D::from(0.5));
+    let mut acc = [Quat::identity(), zero, zero];
+    for j in 0..3 {
+        let (l, ld, ldd) = (lambda[0][j], lambda[1][j], lambda[2][j]);
+        // E = exp(λφ/2), Ė = E ⊗ (0, λ̇φ/2), Ë = E ⊗ (−λ̇²|φ/2|², λ̈φ/2) (E commutes with φ).
+        let e = lie_dual::exp_rotvec(&lie_dual::scale3(&phi[j], D::from(l)));
+        let half_phi = lie_dual::scale3(&phi[j], D::from(0.5));
         let e1 = e.mul(&Quat::pure(lie_dual::scale3(&half_phi, D::from(ld))));
         let e2 = e.mul(&Quat::from_parts(
             -lie_dual::dot(&half_phi, &half_phi) * (ld * ld),
@@ -523,15 +569,83 @@ fn lie_jet<D: Scalar>(theta: &[D; LOCAL], lambda: &[[f64; 3]; 3]) -> Jet<D> {
                 .add(&a1.mul(&e1).scale(D::from(2.0)))
                 .add(&a0.mul(&e2)),
         ];
-        let (pj, pprev) = (p(j), p(j - 1));
-        for a in 0..3 {
-            let dp = pj[a] - pprev[a];
-            pos[0][a] += dp * l;
-            pos[1][a] += dp * ld;
-            pos[2][a] += dp * ldd;
+    }
+    acc
+}
+
+/// Inputs of the per-time rotation: `q_0` (4 components `w, x, y, z`) then `φ_1, φ_2, φ_3`.
+const SEG_OUT: usize = 4 + 9;
+
+/// `∂(q_0, φ_1..3)/∂(r_0..r_3)`, `SEG_OUT × 12`, row-major, with the values `(q_0, φ)`.
+#[derive(Clone, Copy, Debug)]
+struct SegmentJacobian {
+    q0: Quaternion<f64>,
+    phi: [V3<f64>; 3],
+    d_in_d_r: [[f64; ROT_LOCAL]; SEG_OUT],
+}
+
+impl SegmentJacobian {
+    fn new(theta: &[f64; LOCAL]) -> Self {
+        let rot: [f64; ROT_LOCAL] = std::array::from_fn(|k| local_vec(theta, k / 3, 0)[k % 3]);
+        let x: [DualSVec64<ROT_LOCAL>; ROT_LOCAL] = lie_dual::seed(&rot);
+        let r = std::array::from_fn(|k| [x[3 * k], x[3 * k + 1], x[3 * k + 2]]);
+        let (q0, phi) = lie_segment(&r);
+        let outs = [
+            q0.w, q0.x, q0.y, q0.z, phi[0][0], phi[0][1], phi[0][2], phi[1][0], phi[1][1],
+            phi[1][2], phi[2][0], phi[2][1], phi[2][2],
+        ];
+        let d_in_d_r = std::array::from_fn(|o| {
+            let e = outs[o]
+                .eps
+                .unwrap_generic(nalgebra::Const::<ROT_LOCAL>, nalgebra::U1);
+            std::array::from_fn(|k| e[k])
+        });
+        Self {
+            q0: Quaternion::new(q0.w.re, q0.x.re, q0.y.re, q0.z.re),
+            phi: std::array::from_fn(|j| std::array::from_fn(|a| phi[j][a].re)),
+            d_in_d_r,
         }
     }
-    Jet { q: acc, p: pos }
+
+    /// `∂L/∂r` (12) from the rotation cotangents `c_d` of `q^{(d)} = q_0 ⊗ R^{(d)}` at one time:
+    /// `∂L/∂q_0 = Σ_d c_d ⊗ R^{(d)}*`, `∂L/∂R^{(d)} = q_0* ⊗ c_d`, the latter pulled back to `φ`
+    /// by forward-mode AD (`DualSVec64<9>`), then both through `∂(q_0, φ)/∂r`.
+    fn pullback(&self, lambda: &[[f64; 3]; 3], c: &[Quaternion<f64>; 3]) -> [f64; ROT_LOCAL] {
+        let x: [DualSVec64<9>; 9] =
+            lie_dual::seed(&std::array::from_fn(|k| self.phi[k / 3][k % 3]));
+        let phi = std::array::from_fn(|j| [x[3 * j], x[3 * j + 1], x[3 * j + 2]]);
+        let rel = lie_relative(&phi, lambda);
+        let rel_re: [Quaternion<f64>; 3] = std::array::from_fn(|d| {
+            Quaternion::new(rel[d].w.re, rel[d].x.re, rel[d].y.re, rel[d].z.re)
+        });
+        let c_rel: [Quaternion<f64>; 3] = std::array::from_fn(|d| self.q0.conjugate() * c[d]);
+        let g_phi = lie_dual::pullback_quats(&rel, &c_rel);
+        let g_q0 = (0..3).fold(Quaternion::new(0.0, 0.0, 0.0, 0.0), |acc, d| {
+            acc + c[d] * rel_re[d].conjugate()
+        });
+        let g_in: [f64; SEG_OUT] = std::array::from_fn(|o| match o {
+            0 => g_q0.w,
+            1 => g_q0.i,
+            2 => g_q0.j,
+            3 => g_q0.k,
+            _ => g_phi[o - 4],
+        });
+        std::array::from_fn(|k| (0..SEG_OUT).map(|o| self.d_in_d_r[o][k] * g_in[o]).sum())
+    }
+}
+
+/// Weights `w[d][k]` of the local control translations in `p^{(d)}`:
+/// `p = p_0 + Σ_j λ̃_j (p_j − p_{j−1}) = Σ_k (λ̃_k − λ̃_{k+1}) p_k` with `λ̃_0 = 1`, `λ̃_4 = 0`
+/// (and `λ̃_0` contributes nothing to the derivatives).
+fn translation_weights(lambda: &[[f64; 3]; 3]) -> [[f64; SUPPORT]; 3] {
+    std::array::from_fn(|d| {
+        let l = |k: usize| match k {
+            0 if d == 0 => 1.0,
+            1..=3 => lambda[d][k - 1],
+            _ => 0.0,
+        };
+        std::array::from_fn(|k| l(k) - l(k + 1))
+    })
 }
 
 impl<S: Real> PoseField<S> for LieSplinePoses<S> {
@@ -562,14 +676,30 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
         let inv_dt = 1.0 / self.dt_secs;
         for (n, &t) in times_secs.iter().enumerate() {
             let (s, u) = self.segment(t);
-            let jet = lie_jet(&local_params(&self.ctrl, s), &cumulative_basis(u, inv_dt));
+            let lambda = cumulative_basis(u, inv_dt);
+            let theta = local_params(&self.ctrl, s);
+            let r = std::array::from_fn(|k| local_vec(&theta, k, 0));
+            let w = translation_weights(&lambda);
+            let p = std::array::from_fn(|d| {
+                std::array::from_fn(|a| {
+                    (0..SUPPORT).fold(0.0, |acc, k| acc + w[d][k] * local_vec(&theta, k, 3)[a])
+                })
+            });
+            let (q0, phi) = lie_segment(&r);
+            let rel = lie_relative(&phi, &lambda);
+            let jet = Jet {
+                q: std::array::from_fn(|d| q0.mul(&rel[d])),
+                p,
+            };
             lie_dual::write_jet(out, n, &jet);
         }
         Ok(())
     }
 
-    /// Stateless: recomputes each evaluation with `DualSVec64<24>` control values and
-    /// accumulates `Jᵀ · cotangent`.
+    /// Recomputes each evaluation (no state from `forward`). The rotation is differentiated in
+    /// two stages: per segment (cached for the call) `∂(q_0, φ)/∂r` by forward-mode AD over the
+    /// 12 local rotation-vector values, per time `∂q/∂(q_0, φ)` (see `SegmentJacobian`); the
+    /// translation is linear in the control translations ([`translation_weights`]).
     fn backward(
         &mut self,
         times_secs: &[f64],
@@ -580,14 +710,27 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
         grad.check_shape(times_secs.len(), grad.order)?;
         check_grad_len(param_grad.len(), self.ctrl.len())?;
         let inv_dt = 1.0 / self.dt_secs;
+        let mut cache = std::mem::take(&mut self.segment_cache);
+        cache.clear();
+        cache.resize(self.num_control_points() - DEGREE, None);
         for (n, &t) in times_secs.iter().enumerate() {
             let (s, u) = self.segment(t);
-            let theta: [DualSVec64<LOCAL>; LOCAL] = lie_dual::seed(&local_params(&self.ctrl, s));
-            let g = lie_dual::pullback(&lie_jet(&theta, &cumulative_basis(u, inv_dt)), grad, n);
-            for k in 0..LOCAL {
-                param_grad[PER_CONTROL * s + k] += S::from_f64(g[k]);
+            let lambda = cumulative_basis(u, inv_dt);
+            let seg =
+                cache[s].get_or_insert_with(|| SegmentJacobian::new(&local_params(&self.ctrl, s)));
+            let g_rot = seg.pullback(&lambda, &lie_dual::rotation_cotangent(grad, n));
+            let g_p = lie_dual::translation_cotangent(grad, n);
+            let w = translation_weights(&lambda);
+            for k in 0..SUPPORT {
+                let base = PER_CONTROL * (s + k);
+                for a in 0..3 {
+                    param_grad[base + a] += S::from_f64(g_rot[3 * k + a]);
+                    let gp = (0..3).fold(0.0, |acc, d| acc + w[d][k] * g_p[d][a]);
+                    param_grad[base + 3 + a] += S::from_f64(gp);
+                }
             }
         }
+        self.segment_cache = cache;
         Ok(())
     }
 }
