@@ -21,8 +21,17 @@ fn list_prints_tasks_then_pose_fields() {
     let tasks = text.find("tasks:\n").unwrap();
     let fields = text.find("pose fields:\n").unwrap();
     assert!(tasks < fields, "{text}");
-    // TODO(after merge): assert the expected task names (nerf, planar, trajectory, …) and pose
-    // fields (posenet, …) here: it is the only check that catches a missing `use cpose_x as _;`.
+    // The only check that catches a missing `use cpose_x as _;` in the binary.
+    let names: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("  "))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(
+        names,
+        ["trajectory", "composed", "discrete", "lie_spline", "posenet", "spline"],
+        "{text}"
+    );
 }
 
 #[test]

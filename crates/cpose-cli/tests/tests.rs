@@ -9,6 +9,8 @@ use cpose_slam as _;
 
 // Runs the built `cpose` binary: listing, and every kind of bad input.
 mod binary;
+// `cpose eval ate`, bad trajectory files, and a smoke run of every committed config.
+mod commands;
 // Runs `cpose_cli::main_with_args` in this process, with a task and a pose field registered
 // by the test itself: full runs, run folders, errors raised inside tasks.
 mod in_process;
