@@ -18,7 +18,7 @@ pub use faer::Accum;
 pub use mlp::{Init, Mlp, MlpSpec, MlpWorkspace};
 
 /// Rows (samples × streams) per part below which splitting a batch across threads does not pay.
-pub const MIN_ROWS_PER_PART: usize = 256;
+pub const MIN_ROWS_PER_PART: usize = 128;
 
 /// How many parts to split a batch of `rows` stacked rows into: at most
 /// `rayon::current_num_threads()`, each with at least [`MIN_ROWS_PER_PART`] rows.
