@@ -969,6 +969,9 @@ mod tests {
                 range: range()
             })
         );
+        net.evaluate(&[], Order::Acceleration, &mut out)
+            .expect("empty batch");
+        assert!(out.is_empty());
         for bad in [
             PoseNetConfig {
                 skip_layer: 8,
