@@ -95,7 +95,7 @@ pub struct Mlp<S: Real> {
 pub struct MlpWorkspace<S: Real> {
     b: usize,
     streams: usize,
-    /// Per layer: `[z; ż; z̈]` (bias included in the value block); the last is the output.
+    /// Per layer: the product `[xW; ẋW; ẍW]`; for the last layer (the output) with the bias.
     z: Vec<Vec<S>>,
     /// Per hidden layer: `[h; ḣ; ḧ]`.
     h: Vec<Vec<S>>,
@@ -284,12 +284,13 @@ impl<S: Real> Mlp<S> {
                 break;
             }
             grow(&mut ws.h[l], rows * layer.out);
-            grow(&mut ws.s1[l], b * layer.out);
+            let slopes = if act.is_piecewise_linear() { 0 } else { b };
+            grow(&mut ws.s1[l], slopes * layer.out);
             let (h, s1) = (&mut ws.h[l], &mut ws.s1[l]);
             for (c, &bc) in bias.iter().enumerate() {
-                let zc = &mut z[c * rows..(c + 1) * rows];
+                let zc = &z[c * rows..(c + 1) * rows];
                 let hc = &mut h[c * rows..(c + 1) * rows];
-                let sc = &mut s1[c * b..(c + 1) * b];
+                let sc = &mut s1[c * slopes..(c + 1) * slopes];
                 activate_column(act, b, streams, bc, zc, hc, sc);
             }
         }
@@ -333,6 +334,7 @@ impl<S: Real> Mlp<S> {
             } else {
                 let g = &mut ws.g[..rows * out];
                 let (h, s1, z) = (&ws.h[l], &ws.s1[l], &ws.z[l]);
+                let slopes = if act.is_piecewise_linear() { 0 } else { b };
                 for c in 0..out {
                     let r = c * rows..(c + 1) * rows;
                     adjoint_column(
@@ -341,7 +343,7 @@ impl<S: Real> Mlp<S> {
                         streams,
                         &z[r.clone()],
                         &h[r.clone()],
-                        &s1[c * b..(c + 1) * b],
+                        &s1[c * slopes..(c + 1) * slopes],
                         &mut g[r],
                     );
                 }
@@ -389,24 +391,35 @@ impl<S: Real> Mlp<S> {
     }
 }
 
-/// Bias, activation and tangents of one column: `z += b` (value rows), `h = σ(z)`,
-/// `ḣ = σ'(z) ż`, `ḧ = σ'(z) z̈ + σ''(z) ż²`; stores `σ'(z)` in `s1`.
+/// Bias, activation and tangents of one column: `h = σ(z + b)` (value rows),
+/// `ḣ = σ'(z) ż`, `ḧ = σ'(z) z̈ + σ''(z) ż²`; stores `σ'(z)` in `s1` (unused for ReLU, whose
+/// slope is `h > 0`). The value block of `z` is not needed later and is left without the bias.
 #[inline]
 fn activate_column<S: Real>(
     act: Activation,
     b: usize,
     streams: usize,
     bias: S,
-    z: &mut [S],
+    z: &[S],
     h: &mut [S],
     s1: &mut [S],
 ) {
-    let (z0, zt) = z.split_at_mut(b);
+    let (z0, zt) = z.split_at(b);
     let (h0, ht) = h.split_at_mut(b);
+    if act.is_piecewise_linear() {
+        for i in 0..b {
+            h0[i] = (z0[i] + bias).max(S::ZERO);
+        }
+        for s in 0..streams - 1 {
+            let (zs, hs) = (&zt[s * b..(s + 1) * b], &mut ht[s * b..(s + 1) * b]);
+            for i in 0..b {
+                hs[i] = if h0[i] > S::ZERO { zs[i] } else { S::ZERO };
+            }
+        }
+        return;
+    }
     for i in 0..b {
-        let zi = z0[i] + bias;
-        z0[i] = zi;
-        let (hi, si) = act.value_and_slope(zi);
+        let (hi, si) = act.value_and_slope(z0[i] + bias);
         h0[i] = hi;
         s1[i] = si;
     }
@@ -415,18 +428,12 @@ fn activate_column<S: Real>(
             ht[i] = s1[i] * zt[i];
         }
     }
-    if streams >= 3 && !act.is_piecewise_linear() {
+    if streams >= 3 {
         let (zd, zdd) = zt.split_at(b);
         let hdd = &mut ht[b..2 * b];
         for i in 0..b {
             let (s2, _) = act.curvature(h0[i], s1[i]);
             hdd[i] = s1[i] * zdd[i] + s2 * zd[i] * zd[i];
-        }
-    } else if streams >= 3 {
-        let zdd = &zt[b..2 * b];
-        let hdd = &mut ht[b..2 * b];
-        for i in 0..b {
-            hdd[i] = s1[i] * zdd[i];
         }
     }
 }
@@ -442,17 +449,22 @@ fn adjoint_column<S: Real>(
     s1: &[S],
     g: &mut [S],
 ) {
+    if act.is_piecewise_linear() {
+        // σ'' = 0: every stream is masked by σ' = [h > 0].
+        for s in 0..streams {
+            let gs = &mut g[s * b..(s + 1) * b];
+            for i in 0..b {
+                if h[i] <= S::ZERO {
+                    gs[i] = S::ZERO;
+                }
+            }
+        }
+        return;
+    }
     match streams {
         1 => {
             for i in 0..b {
                 g[i] *= s1[i];
-            }
-        }
-        _ if act.is_piecewise_linear() => {
-            for s in 0..streams {
-                for i in 0..b {
-                    g[s * b + i] *= s1[i];
-                }
             }
         }
         _ => {

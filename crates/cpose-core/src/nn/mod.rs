@@ -18,7 +18,11 @@ pub use faer::Accum;
 pub use mlp::{Init, Mlp, MlpSpec, MlpWorkspace};
 
 /// Rows (samples × streams) per part below which splitting a batch across threads does not pay.
-pub const MIN_ROWS_PER_PART: usize = 256;
+///
+/// Each part runs single-threaded matrix products (`Par::Seq`) and the parts' weight gradients
+/// are summed (DESIGN.md, "Performance model"). On a busy machine (other processes on both
+/// cores) a split loses even at large batches, so small batches stay on one thread.
+pub const MIN_ROWS_PER_PART: usize = 128;
 
 /// How many parts to split a batch of `rows` stacked rows into: at most
 /// `rayon::current_num_threads()`, each with at least [`MIN_ROWS_PER_PART`] rows.

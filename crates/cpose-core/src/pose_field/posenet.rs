@@ -913,6 +913,50 @@ mod tests {
         ));
     }
 
+    /// The batch split over threads (parts summed) gives the single-thread result.
+    #[test]
+    fn batch_split_matches_single_part() {
+        let ts: Vec<f64> = (0..300).map(|i| 1.0 + 5.0 * i as f64 / 299.0).collect();
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool");
+            pool.install(|| {
+                let mut net = small(Activation::Softplus)
+                    .init::<f64>(range())
+                    .expect("valid");
+                perturb(&mut net, 4);
+                let mut out = PoseBatch::default();
+                net.forward(&ts, Order::Acceleration, &mut out)
+                    .expect("in range");
+                let mut grad = vec![0.0; net.num_params()];
+                net.backward(&ts, &out.clone(), &mut grad).expect("shapes");
+                (net.ws.used, out, grad)
+            })
+        };
+        let (parts1, out1, g1) = run(1);
+        let (parts2, out2, g2) = run(2);
+        assert_eq!((parts1, parts2), (1, 2));
+        assert!(
+            out1.rotation_acc
+                .iter()
+                .zip(&out2.rotation_acc)
+                .all(|(a, b)| (a - b).norm() < 1e-12)
+        );
+        assert!(
+            out1.lin_vel_world
+                .iter()
+                .zip(&out2.lin_vel_world)
+                .all(|(a, b)| (a - b).norm() < 1e-12)
+        );
+        assert!(
+            g1.iter()
+                .zip(&g2)
+                .all(|(a, b)| (a - b).abs() < 1e-9 * (1.0 + a.abs()))
+        );
+    }
+
     #[test]
     fn out_of_range_and_invalid_configs_are_errors() {
         let net = small(Activation::Relu).init::<f32>(range()).expect("valid");
@@ -925,6 +969,9 @@ mod tests {
                 range: range()
             })
         );
+        net.evaluate(&[], Order::Acceleration, &mut out)
+            .expect("empty batch");
+        assert!(out.is_empty());
         for bad in [
             PoseNetConfig {
                 skip_layer: 8,
