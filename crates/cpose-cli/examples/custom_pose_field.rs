@@ -29,7 +29,10 @@ struct ConstantTurn<S> {
 
 impl<S: Real> ConstantTurn<S> {
     fn new(range: TimeRange) -> Self {
-        Self { range, params: [S::ZERO; 8] }
+        Self {
+            range,
+            params: [S::ZERO; 8],
+        }
     }
 
     fn p(&self, k: usize) -> f64 {
@@ -54,7 +57,12 @@ impl<S: Real> PoseField<S> for ConstantTurn<S> {
         visit(ParamKind::Pose, &mut self.params);
     }
 
-    fn evaluate(&self, times_secs: &[f64], order: Order, out: &mut PoseBatch) -> Result<(), PoseFieldError> {
+    fn evaluate(
+        &self,
+        times_secs: &[f64],
+        order: Order,
+        out: &mut PoseBatch,
+    ) -> Result<(), PoseFieldError> {
         check_times(&self.range, times_secs)?;
         out.reset(times_secs.len(), order);
         let p0 = Vector3::new(self.p(0), self.p(1), self.p(2));
@@ -79,7 +87,12 @@ impl<S: Real> PoseField<S> for ConstantTurn<S> {
         Ok(())
     }
 
-    fn backward(&mut self, times_secs: &[f64], grad: &PoseBatch, param_grad: &mut [S]) -> Result<(), PoseFieldError> {
+    fn backward(
+        &mut self,
+        times_secs: &[f64],
+        grad: &PoseBatch,
+        param_grad: &mut [S],
+    ) -> Result<(), PoseFieldError> {
         check_times(&self.range, times_secs)?;
         let (psi0, omega) = (self.p(6), self.p(7));
         let mut g = [0.0f64; 8];
@@ -149,7 +162,13 @@ mod tests {
 
     #[test]
     fn is_registered_next_to_the_builtins() {
-        let names: Vec<_> = cpose_core::registry::pose_fields().iter().map(|f| f.name).collect();
-        assert!(names.contains(&"constant_turn") && names.contains(&"posenet"), "{names:?}");
+        let names: Vec<_> = cpose_core::registry::pose_fields()
+            .iter()
+            .map(|f| f.name)
+            .collect();
+        assert!(
+            names.contains(&"constant_turn") && names.contains(&"posenet"),
+            "{names:?}"
+        );
     }
 }

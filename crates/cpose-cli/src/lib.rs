@@ -227,18 +227,28 @@ fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
     let gt = eval::read_tum(&args.gt).map_err(|e| usage(e.into()))?;
     let est = eval::read_tum(&args.est).map_err(|e| usage(e.into()))?;
     let report = eval::ate(&gt, &est, args.align, args.max_diff)
-        .with_context(|| format!("comparing {} with {}", args.est.display(), args.gt.display()))
+        .with_context(|| {
+            format!(
+                "comparing {} with {}",
+                args.est.display(),
+                args.gt.display()
+            )
+        })
         .map_err(Failure::Run)?;
     let text = if args.json {
         serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
     } else {
         format!(
             "matched {} pose pairs (max time difference {} s), alignment {}{}\n\
-             rmse   {:.9} m\nmean   {:.9} m\nmedian {:.9} m\nstd    {:.9} m\nmin    {:.9} m\nmax    {:.9} m\n",
+             rmse   {:.12} m\nmean   {:.12} m\nmedian {:.12} m\nstd    {:.12} m\nmin    {:.12} m\nmax    {:.12} m\n",
             report.num_matched,
             args.max_diff,
             report.alignment,
-            if report.alignment == Alignment::Sim3 { format!(" (scale {:.9})", report.transform.scale) } else { String::new() },
+            if report.alignment == Alignment::Sim3 {
+                format!(" (scale {:.9})", report.transform.scale)
+            } else {
+                String::new()
+            },
             report.rmse_m,
             report.mean_m,
             report.median_m,

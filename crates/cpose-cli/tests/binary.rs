@@ -29,7 +29,14 @@ fn list_prints_tasks_then_pose_fields() {
         .collect();
     assert_eq!(
         names,
-        ["trajectory", "composed", "discrete", "lie_spline", "posenet", "spline"],
+        [
+            "trajectory",
+            "composed",
+            "discrete",
+            "lie_spline",
+            "posenet",
+            "spline"
+        ],
         "{text}"
     );
 }

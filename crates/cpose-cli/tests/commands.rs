@@ -9,7 +9,11 @@ use cpose_core::eval::{self, Alignment};
 use crate::util::{temp_dir, write};
 
 fn cpose_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_cpose")).current_dir(dir).args(args).output().expect("the cpose binary runs")
+    Command::new(env!("CARGO_BIN_EXE_cpose"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("the cpose binary runs")
 }
 
 fn workspace_root() -> PathBuf {
@@ -23,8 +27,15 @@ fn tum_dir() -> Option<PathBuf> {
 
 /// The value after `label` on the line that starts with it.
 fn value_after(text: &str, label: &str) -> f64 {
-    let line = text.lines().find(|l| l.starts_with(label)).unwrap_or_else(|| panic!("no {label:?} in {text}"));
-    line[label.len()..].split_whitespace().next().unwrap().parse().unwrap()
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(label))
+        .unwrap_or_else(|| panic!("no {label:?} in {text}"));
+    line[label.len()..]
+        .split_whitespace()
+        .next()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no number after {label:?} in {line:?}"))
 }
 
 #[test]
@@ -33,20 +44,53 @@ fn eval_ate_prints_the_library_rmse_for_each_alignment() {
         eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
         return;
     };
-    let (gt, est) = (dir.join("groundtruth.txt"), dir.join("rgbdslam_estimate.txt"));
+    let (gt, est) = (
+        dir.join("groundtruth.txt"),
+        dir.join("rgbdslam_estimate.txt"),
+    );
     let gt_traj = eval::read_tum(&gt).unwrap();
     let est_traj = eval::read_tum(&est).unwrap();
     for align in Alignment::ALL {
-        let out = cpose_in(&workspace_root(), &["eval", "ate", gt.to_str().unwrap(), est.to_str().unwrap(), "--align", align.as_str()]);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let out = cpose_in(
+            &workspace_root(),
+            &[
+                "eval",
+                "ate",
+                gt.to_str().unwrap(),
+                est.to_str().unwrap(),
+                "--align",
+                align.as_str(),
+            ],
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let text = String::from_utf8(out.stdout).unwrap();
         let expected = eval::ate(&gt_traj, &est_traj, align, 0.01).unwrap();
         let printed = value_after(&text, "rmse");
-        assert!((printed - expected.rmse_m).abs() <= 1e-9 * expected.rmse_m, "{align}: {printed} vs {}", expected.rmse_m);
-        assert!(text.contains(&format!("matched {} pose pairs", expected.num_matched)), "{text}");
+        assert!(
+            (printed - expected.rmse_m).abs() <= 1e-9 * expected.rmse_m,
+            "{align}: {printed} vs {}",
+            expected.rmse_m
+        );
+        assert!(
+            text.contains(&format!("matched {} pose pairs", expected.num_matched)),
+            "{text}"
+        );
     }
     // Default alignment is se3 (evo -a): 0.013470 m on these files.
-    let out = cpose_in(&workspace_root(), &["eval", "ate", gt.to_str().unwrap(), est.to_str().unwrap(), "--json"]);
+    let out = cpose_in(
+        &workspace_root(),
+        &[
+            "eval",
+            "ate",
+            gt.to_str().unwrap(),
+            est.to_str().unwrap(),
+            "--json",
+        ],
+    );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(report["alignment"], "se3");
     assert!((report["rmse_m"].as_f64().unwrap() - 0.013470088849734).abs() < 1e-12);
@@ -55,23 +99,61 @@ fn eval_ate_prints_the_library_rmse_for_each_alignment() {
 #[test]
 fn eval_ate_rejects_malformed_trajectories_with_file_and_line() {
     let dir = temp_dir("bad-tum");
-    let good = write(&dir, "good.txt", "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 1 1 0 0 0 0 1\n");
+    let good = write(
+        &dir,
+        "good.txt",
+        "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n3.0 1 1 0 0 0 0 1\n",
+    );
     let cases = [
-        ("columns.txt", "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 1\n", "line 2", "expected 8 columns"),
-        ("nan.txt", "1.0 0 0 0 0 0 0 1\n2.0 nan 0 0 0 0 0 1\n", "line 2", "finite"),
-        ("unsorted.txt", "2.0 0 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n", "line 2", "increasing"),
-        ("duplicate.txt", "1.0 0 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n", "line 2", "duplicate"),
+        (
+            "columns.txt",
+            "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 1\n",
+            "line 2",
+            "expected 8 columns",
+        ),
+        (
+            "nan.txt",
+            "1.0 0 0 0 0 0 0 1\n2.0 nan 0 0 0 0 0 1\n",
+            "line 2",
+            "finite",
+        ),
+        (
+            "unsorted.txt",
+            "2.0 0 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n",
+            "line 2",
+            "increasing",
+        ),
+        (
+            "duplicate.txt",
+            "1.0 0 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n",
+            "line 2",
+            "duplicate",
+        ),
     ];
     for (name, text, line, what) in cases {
         let bad = write(&dir, name, text);
-        let out = cpose_in(&dir, &["eval", "ate", good.to_str().unwrap(), bad.to_str().unwrap()]);
+        let out = cpose_in(
+            &dir,
+            &["eval", "ate", good.to_str().unwrap(), bad.to_str().unwrap()],
+        );
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{name}: {err}");
-        assert!(err.contains(line) && err.to_lowercase().contains(what) && err.contains(name), "{name}: {err}");
+        assert!(
+            err.contains(line) && err.to_lowercase().contains(what) && err.contains(name),
+            "{name}: {err}"
+        );
         assert_eq!(err.lines().count(), 1, "{name}: printed once: {err}");
     }
     let missing = dir.join("missing.txt");
-    let out = cpose_in(&dir, &["eval", "ate", good.to_str().unwrap(), missing.to_str().unwrap()]);
+    let out = cpose_in(
+        &dir,
+        &[
+            "eval",
+            "ate",
+            good.to_str().unwrap(),
+            missing.to_str().unwrap(),
+        ],
+    );
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.txt"));
 }
@@ -81,30 +163,60 @@ fn eval_ate_rejects_malformed_trajectories_with_file_and_line() {
 #[test]
 fn every_config_runs_as_a_smoke_test() {
     let configs_dir = workspace_root().join("configs");
-    let mut configs: Vec<PathBuf> = std::fs::read_dir(&configs_dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+    let mut configs: Vec<PathBuf> = std::fs::read_dir(&configs_dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
     configs.sort();
     assert!(configs.len() >= 2, "{configs:?}");
     let data = cpose_core::fs::shared_data_dir();
     for config in configs {
         let text = std::fs::read_to_string(&config).unwrap();
-        let mut args: Vec<String> = vec!["run".into(), config.to_str().unwrap().into(), "-q".into()];
+        let mut args: Vec<String> =
+            vec!["run".into(), config.to_str().unwrap().into(), "-q".into()];
         if text.contains("source = \"euroc\"") {
             let Some(data) = &data else {
                 eprintln!("skipped {}: shared data folder not found", config.display());
                 continue;
             };
             args.push("--set".into());
-            args.push(format!("data.path={}", data.join("euroc/V1_02_excerpt").display()));
+            args.push(format!(
+                "data.path={}",
+                data.join("euroc/V1_02_excerpt").display()
+            ));
         }
         let out_dir = temp_dir("smoke").join("run");
-        args.extend(["--set".into(), "run.iterations_scale=0.005".into(), "--set".into(), "run.threads=1".into(), "--out".into(), out_dir.to_str().unwrap().into()]);
+        args.extend([
+            "--set".into(),
+            "run.iterations_scale=0.005".into(),
+            "--set".into(),
+            "run.threads=1".into(),
+            "--out".into(),
+            out_dir.to_str().unwrap().into(),
+        ]);
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let out = cpose_in(&workspace_root(), &args);
-        assert!(out.status.success(), "{}: {}", config.display(), String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            config.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
         for file in ["config.toml", "metrics.json", "log.txt"] {
-            assert!(out_dir.join(file).is_file(), "{}: no {file}", config.display());
+            assert!(
+                out_dir.join(file).is_file(),
+                "{}: no {file}",
+                config.display()
+            );
         }
-        let metrics: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap()).unwrap();
-        assert!(metrics.as_object().is_some_and(|m| !m.is_empty()), "{}: empty metrics", config.display());
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap())
+                .unwrap();
+        assert!(
+            metrics.as_object().is_some_and(|m| !m.is_empty()),
+            "{}: empty metrics",
+            config.display()
+        );
     }
 }

@@ -71,7 +71,11 @@ pub struct EurocSequence {
 impl EurocSequence {
     /// Loads a sequence from its folder (the one holding `mav0/`, or `mav0/` itself).
     pub fn load(dir: &Path) -> Result<Self, DataError> {
-        let mav0 = if dir.join("mav0").is_dir() { dir.join("mav0") } else { dir.to_path_buf() };
+        let mav0 = if dir.join("mav0").is_dir() {
+            dir.join("mav0")
+        } else {
+            dir.to_path_buf()
+        };
         let file = |rel: &str| -> PathBuf { mav0.join(rel) };
         let gt_path = file("state_groundtruth_estimate0/data.csv");
         let ground_truth = read_ground_truth(&gt_path)?;
@@ -96,16 +100,33 @@ impl EurocSequence {
 }
 
 /// Splits a CSV line into `expected` numbers, or says which line and what was wrong.
-fn numbers(path: &Path, line_no: usize, line: &str, expected: usize, header: &str) -> Result<Vec<f64>, DataError> {
+fn numbers(
+    path: &Path,
+    line_no: usize,
+    line: &str,
+    expected: usize,
+    header: &str,
+) -> Result<Vec<f64>, DataError> {
     let values: Vec<&str> = line.split(',').map(str::trim).collect();
     if values.len() != expected {
-        return Err(DataError::parse(path, line_no, format!("expected {expected} comma-separated columns ({header}), got {}", values.len())));
+        return Err(DataError::parse(
+            path,
+            line_no,
+            format!(
+                "expected {expected} comma-separated columns ({header}), got {}",
+                values.len()
+            ),
+        ));
     }
     values
         .iter()
         .map(|v| match v.parse::<f64>() {
             Ok(x) if x.is_finite() => Ok(x),
-            _ => Err(DataError::parse(path, line_no, format!("expected a finite number, got {v:?}"))),
+            _ => Err(DataError::parse(
+                path,
+                line_no,
+                format!("expected a finite number, got {v:?}"),
+            )),
         })
         .collect()
 }
@@ -116,7 +137,13 @@ fn stamp(path: &Path, line_no: usize, line: &str) -> Result<Timestamp, DataError
     first
         .parse::<i64>()
         .map(Timestamp::from_nanos)
-        .map_err(|_| DataError::parse(path, line_no, format!("expected an integer timestamp in nanoseconds, got {first:?}")))
+        .map_err(|_| {
+            DataError::parse(
+                path,
+                line_no,
+                format!("expected an integer timestamp in nanoseconds, got {first:?}"),
+            )
+        })
 }
 
 /// Data lines (1-based number, text) of a CSV file, skipping `#` comments and blank lines;
@@ -130,7 +157,11 @@ fn csv_rows(path: &Path) -> Result<Vec<(usize, String)>, DataError> {
         .map(|(i, l)| (i + 1, l.to_owned()))
         .collect();
     if rows.is_empty() {
-        return Err(DataError::parse(path, 1, "expected at least one data row, the file has none".into()));
+        return Err(DataError::parse(
+            path,
+            1,
+            "expected at least one data row, the file has none".into(),
+        ));
     }
     Ok(rows)
 }
@@ -138,8 +169,20 @@ fn csv_rows(path: &Path) -> Result<Vec<(usize, String)>, DataError> {
 fn check_increasing(path: &Path, stamps: &[(usize, Timestamp)]) -> Result<(), DataError> {
     for w in stamps.windows(2) {
         if w[1].1 <= w[0].1 {
-            let what = if w[1].1 == w[0].1 { "a duplicate" } else { "an earlier" };
-            return Err(DataError::parse(path, w[1].0, format!("expected increasing timestamps, got {what} timestamp {} after {}", w[1].1.as_nanos(), w[0].1.as_nanos())));
+            let what = if w[1].1 == w[0].1 {
+                "a duplicate"
+            } else {
+                "an earlier"
+            };
+            return Err(DataError::parse(
+                path,
+                w[1].0,
+                format!(
+                    "expected increasing timestamps, got {what} timestamp {} after {}",
+                    w[1].1.as_nanos(),
+                    w[0].1.as_nanos()
+                ),
+            ));
         }
     }
     Ok(())
@@ -155,11 +198,18 @@ pub fn read_ground_truth(path: &Path) -> Result<Vec<GroundTruthState>, DataError
         let t = stamp(path, line_no, &line)?;
         let q = Quaternion::new(v[4], v[5], v[6], v[7]);
         if q.norm() < 1e-6 {
-            return Err(DataError::parse(path, line_no, "expected a unit quaternion q_w q_x q_y q_z, got a zero quaternion".into()));
+            return Err(DataError::parse(
+                path,
+                line_no,
+                "expected a unit quaternion q_w q_x q_y q_z, got a zero quaternion".into(),
+            ));
         }
         out.push(GroundTruthState {
             stamp: t,
-            world_from_body: Isometry3::from_parts(Translation3::new(v[1], v[2], v[3]), UnitQuaternion::from_quaternion(q)),
+            world_from_body: Isometry3::from_parts(
+                Translation3::new(v[1], v[2], v[3]),
+                UnitQuaternion::from_quaternion(q),
+            ),
             lin_vel_world: Vector3::new(v[8], v[9], v[10]),
             gyro_bias: Vector3::new(v[11], v[12], v[13]),
             accel_bias: Vector3::new(v[14], v[15], v[16]),
@@ -178,7 +228,11 @@ pub fn read_imu(path: &Path) -> Result<Vec<RawImuSample>, DataError> {
     for (line_no, line) in csv_rows(path)? {
         let v = numbers(path, line_no, &line, 7, HEADER)?;
         let t = stamp(path, line_no, &line)?;
-        out.push(RawImuSample { stamp: t, gyro: Vector3::new(v[1], v[2], v[3]), accel: Vector3::new(v[4], v[5], v[6]) });
+        out.push(RawImuSample {
+            stamp: t,
+            gyro: Vector3::new(v[1], v[2], v[3]),
+            accel: Vector3::new(v[4], v[5], v[6]),
+        });
         stamps.push((line_no, t));
     }
     check_increasing(path, &stamps)?;
@@ -195,29 +249,56 @@ pub struct SensorYaml {
 /// Reads a `sensor.yaml`.
 pub fn read_sensor_yaml(path: &Path) -> Result<SensorYaml, DataError> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
-    Ok(SensorYaml { path: path.to_path_buf(), text })
+    Ok(SensorYaml {
+        path: path.to_path_buf(),
+        text,
+    })
 }
 
 impl SensorYaml {
     fn uncommented(&self) -> impl Iterator<Item = (usize, &str)> {
-        self.text.lines().enumerate().map(|(i, l)| (i + 1, l.split('#').next().unwrap_or("")))
+        self.text
+            .lines()
+            .enumerate()
+            .map(|(i, l)| (i + 1, l.split('#').next().unwrap_or("")))
     }
 
     /// The number after `key:` at the start of a line.
     pub fn number(&self, key: &str) -> Result<f64, DataError> {
         for (line_no, line) in self.uncommented() {
-            if let Some(rest) = line.trim_start().strip_prefix(key).and_then(|r| r.trim_start().strip_prefix(':')) {
-                return rest.trim().parse().map_err(|_| DataError::parse(&self.path, line_no, format!("expected a number for {key}, got {:?}", rest.trim())));
+            if let Some(rest) = line
+                .trim_start()
+                .strip_prefix(key)
+                .and_then(|r| r.trim_start().strip_prefix(':'))
+            {
+                return rest.trim().parse().map_err(|_| {
+                    DataError::parse(
+                        &self.path,
+                        line_no,
+                        format!("expected a number for {key}, got {:?}", rest.trim()),
+                    )
+                });
             }
         }
-        Err(DataError::parse(&self.path, 1, format!("expected a key {key:?}, found none")))
+        Err(DataError::parse(
+            &self.path,
+            1,
+            format!("expected a key {key:?}, found none"),
+        ))
     }
 
     /// `T_BS` as an isometry (its 16 row-major values after `data:`).
     pub fn t_bs(&self) -> Result<Isometry3<f64>, DataError> {
-        let start = self.uncommented().find(|(_, l)| l.trim_start().starts_with("T_BS")).map(|(n, _)| n);
+        let start = self
+            .uncommented()
+            .find(|(_, l)| l.trim_start().starts_with("T_BS"))
+            .map(|(n, _)| n);
         let Some(start) = start else {
-            return Err(DataError::parse(&self.path, 1, "expected a T_BS entry, found none".into()));
+            return Err(DataError::parse(
+                &self.path,
+                1,
+                "expected a T_BS entry, found none".into(),
+            ));
         };
         let mut collected = String::new();
         let mut inside = false;
@@ -235,14 +316,34 @@ impl SensorYaml {
                 break;
             }
         }
-        let values: Result<Vec<f64>, _> = collected.trim().trim_start_matches('[').split(']').next().unwrap_or("").split(',').map(|s| s.trim().parse::<f64>()).collect();
+        let values: Result<Vec<f64>, _> = collected
+            .trim()
+            .trim_start_matches('[')
+            .split(']')
+            .next()
+            .unwrap_or("")
+            .split(',')
+            .map(|s| s.trim().parse::<f64>())
+            .collect();
         let values = match values {
             Ok(v) if v.len() == 16 => v,
-            _ => return Err(DataError::parse(&self.path, start, "expected T_BS data with 16 numbers (a row-major 4×4 matrix)".into())),
+            _ => {
+                return Err(DataError::parse(
+                    &self.path,
+                    start,
+                    "expected T_BS data with 16 numbers (a row-major 4×4 matrix)".into(),
+                ));
+            }
         };
-        let r = Matrix3::new(values[0], values[1], values[2], values[4], values[5], values[6], values[8], values[9], values[10]);
+        let r = Matrix3::new(
+            values[0], values[1], values[2], values[4], values[5], values[6], values[8], values[9],
+            values[10],
+        );
         let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
-        Ok(Isometry3::from_parts(Translation3::new(values[3], values[7], values[11]), rotation))
+        Ok(Isometry3::from_parts(
+            Translation3::new(values[3], values[7], values[11]),
+            rotation,
+        ))
     }
 }
 
@@ -269,7 +370,10 @@ mod tests {
         // q_RS is stored w first: (0.161869, 0.790012, -0.205215, 0.554587).
         let q = first.world_from_body.rotation.quaternion();
         assert!((q.w - 0.161869).abs() < 1e-5 && (q.i - 0.790012).abs() < 1e-5);
-        assert_eq!(seq.imu[0].gyro, Vector3::new(-0.0006981317, 0.0195476876, 0.0767944871));
+        assert_eq!(
+            seq.imu[0].gyro,
+            Vector3::new(-0.0006981317, 0.0195476876, 0.0767944871)
+        );
         assert!(seq.body_from_imu.translation.vector.norm() == 0.0);
         // cam0's T_BS: the camera sits about 6.5 cm along −y of the body, its z axis ≈ body z.
         assert!((seq.body_from_cam.translation.vector.y + 0.064676986768).abs() < 1e-12);
@@ -288,10 +392,16 @@ mod tests {
     fn malformed_files_name_the_line_and_the_expectation() {
         let wrong_cols = temp_file("cols.csv", "#header\n1,0.1,0.2,0.3,1,2\n");
         let err = read_imu(&wrong_cols).unwrap_err().to_string();
-        assert!(err.contains("line 2 of") && err.contains("expected 7 comma-separated columns"), "{err}");
+        assert!(
+            err.contains("line 2 of") && err.contains("expected 7 comma-separated columns"),
+            "{err}"
+        );
         let nan = temp_file("nan.csv", "1,0.1,nan,0.3,1,2,3\n");
         let err = read_imu(&nan).unwrap_err().to_string();
-        assert!(err.contains("line 1") && err.contains("finite number"), "{err}");
+        assert!(
+            err.contains("line 1") && err.contains("finite number"),
+            "{err}"
+        );
         let unsorted = temp_file("unsorted.csv", "2,0,0,0,0,0,0\n2,0,0,0,0,0,0\n");
         let err = read_imu(&unsorted).unwrap_err().to_string();
         assert!(err.contains("line 2") && err.contains("duplicate"), "{err}");

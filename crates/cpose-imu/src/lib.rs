@@ -36,9 +36,16 @@ pub enum DataError {
 
 impl DataError {
     fn io(path: &Path, source: std::io::Error) -> Self {
-        Self::Io { path: path.to_path_buf(), source }
+        Self::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     }
     fn parse(path: &Path, line: usize, message: String) -> Self {
-        Self::Parse { path: path.to_path_buf(), line, message }
+        Self::Parse {
+            path: path.to_path_buf(),
+            line,
+            message,
+        }
     }
 }

@@ -31,7 +31,13 @@ fn l1_q(q: &Quaternion<f64>) -> f64 {
 /// `L = w/n Σ_i (|q_i − s_i q̂_i|² + |p_i − p̂_i|² / scale²)`, where `s_i = ±1` aligns the
 /// target quaternion's sign with the estimate (q and −q are the same rotation) and `scale`
 /// (metres) makes translation and quaternion errors comparable.
-pub fn pose_l2(out: &PoseBatch, targets: &[Isometry3<f64>], weight: f64, scale: f64, grad: &mut PoseBatch) -> f64 {
+pub fn pose_l2(
+    out: &PoseBatch,
+    targets: &[Isometry3<f64>],
+    weight: f64,
+    scale: f64,
+    grad: &mut PoseBatch,
+) -> f64 {
     let n = targets.len() as f64;
     let inv_s2 = 1.0 / (scale * scale);
     let mut loss = 0.0;
@@ -56,7 +62,12 @@ pub fn pose_l2(out: &PoseBatch, targets: &[Isometry3<f64>], weight: f64, scale: 
 ///
 /// Gradient: with `r = q̇ − ½ q ⊗ e`, `e = (0, ω)` and `s = sign(r)`,
 /// `∂L/∂q̇ = w s / n` and `∂L/∂q = −½ w (s ⊗ e*) / n` (because `⟨s, q ⊗ e⟩ = ⟨s ⊗ e*, q⟩`).
-pub fn gyro_tight_l1(out: &PoseBatch, gyro_body: &[Vector3<f64>], weight: f64, grad: &mut PoseBatch) -> f64 {
+pub fn gyro_tight_l1(
+    out: &PoseBatch,
+    gyro_body: &[Vector3<f64>],
+    weight: f64,
+    grad: &mut PoseBatch,
+) -> f64 {
     let n = gyro_body.len() as f64;
     let mut loss = 0.0;
     for (i, w) in gyro_body.iter().enumerate() {
@@ -79,7 +90,14 @@ pub fn gyro_tight_l1(out: &PoseBatch, gyro_body: &[Vector3<f64>], weight: f64, g
 /// Gradient: with `a = scale·p̈ − g`, `f̂ = Rᵀ a = vec(q* ⊗ (0, a) ⊗ q)` for unit `q` and
 /// `s = sign(f̂ − f)`: `∂L/∂p̈ = w·scale·R s / n`, and `∂L/∂q = −2 w (0,a) ⊗ q ⊗ (0,s) / n`
 /// from the product rule on `q* ⊗ A ⊗ q` (both factors contribute `−A ⊗ q ⊗ S`, as `A* = −A`).
-pub fn accel_l1(out: &PoseBatch, accel_body: &[Vector3<f64>], gravity_world: &Vector3<f64>, scale: f64, weight: f64, grad: &mut PoseBatch) -> f64 {
+pub fn accel_l1(
+    out: &PoseBatch,
+    accel_body: &[Vector3<f64>],
+    gravity_world: &Vector3<f64>,
+    scale: f64,
+    weight: f64,
+    grad: &mut PoseBatch,
+) -> f64 {
     let n = accel_body.len() as f64;
     let mut loss = 0.0;
     for (i, f) in accel_body.iter().enumerate() {
@@ -108,7 +126,8 @@ mod tests {
         let mut b = PoseBatch::zeros(3, Order::Acceleration);
         for i in 0..3 {
             let x = i as f64;
-            b.rotation[i] = *UnitQuaternion::from_scaled_axis(Vector3::new(0.3 + x, -0.2, 0.5 * x)).quaternion();
+            b.rotation[i] = *UnitQuaternion::from_scaled_axis(Vector3::new(0.3 + x, -0.2, 0.5 * x))
+                .quaternion();
             b.rotation_rate[i] = Quaternion::new(0.1, -0.3 + x, 0.2, 0.05 * x);
             b.translation[i] = Vector3::new(0.4, -x, 1.3);
             b.lin_acc_world[i] = Vector3::new(0.7 - x, 0.2, -0.4 * x + 0.1);
@@ -144,7 +163,8 @@ mod tests {
         let value = |b: &PoseBatch| loss(b, &mut PoseBatch::zeros(3, Order::Acceleration));
         let h = 1e-7;
         let slots = (0..3).flat_map(|i| {
-            (0..4).flat_map(move |k| [Slot::Rotation(i, k), Slot::RotationRate(i, k)])
+            (0..4)
+                .flat_map(move |k| [Slot::Rotation(i, k), Slot::RotationRate(i, k)])
                 .chain((0..3).flat_map(move |k| [Slot::Translation(i, k), Slot::LinAcc(i, k)]))
         });
         for s in slots {
@@ -153,21 +173,33 @@ mod tests {
             *slot(&mut minus, s) -= h;
             let fd = (value(&plus) - value(&minus)) / (2.0 * h);
             let an = *slot(&mut g, s);
-            assert!((fd - an).abs() < 1e-6, "{s:?}: central difference {fd} vs cotangent {an}");
+            assert!(
+                (fd - an).abs() < 1e-6,
+                "{s:?}: central difference {fd} vs cotangent {an}"
+            );
         }
     }
 
     #[test]
     fn pose_loss_gradient() {
         let targets: Vec<_> = (0..3)
-            .map(|i| Isometry3::from_parts(Translation3::new(0.1 * i as f64, 0.3, -0.2), UnitQuaternion::from_scaled_axis(Vector3::new(0.2, 0.1 * i as f64, -0.6))))
+            .map(|i| {
+                Isometry3::from_parts(
+                    Translation3::new(0.1 * i as f64, 0.3, -0.2),
+                    UnitQuaternion::from_scaled_axis(Vector3::new(0.2, 0.1 * i as f64, -0.6)),
+                )
+            })
             .collect();
         check(|b, g| pose_l2(b, &targets, 0.7, 0.5, g));
     }
 
     #[test]
     fn gyro_loss_gradient_and_zero_at_consistent_rates() {
-        let gyro = [Vector3::new(0.3, -0.1, 0.8), Vector3::new(-0.5, 0.2, 0.1), Vector3::new(0.05, 0.4, -0.3)];
+        let gyro = [
+            Vector3::new(0.3, -0.1, 0.8),
+            Vector3::new(-0.5, 0.2, 0.1),
+            Vector3::new(0.05, 0.4, -0.3),
+        ];
         check(|b, g| gyro_tight_l1(b, &gyro, 1.3, g));
         // q̇ = ½ q ⊗ (0, ω) makes the loss vanish.
         let mut b = primal();
@@ -180,13 +212,26 @@ mod tests {
 
     #[test]
     fn accel_loss_gradient_and_gravity_at_rest() {
-        let accel = [Vector3::new(0.3, -0.1, 9.8), Vector3::new(-0.5, 0.2, 9.1), Vector3::new(1.05, 0.4, -0.3)];
+        let accel = [
+            Vector3::new(0.3, -0.1, 9.8),
+            Vector3::new(-0.5, 0.2, 9.1),
+            Vector3::new(1.05, 0.4, -0.3),
+        ];
         let g = cpose_core::gravity_world();
         check(|b, gr| accel_l1(b, &accel, &g, 2.0, 0.9, gr));
         // At rest and level, the accelerometer reads +9.81 along body z.
         let mut b = PoseBatch::zeros(1, Order::Acceleration);
         b.rotation[0] = Quaternion::identity();
         let at_rest = [Vector3::new(0.0, 0.0, cpose_core::geometry::GRAVITY_M_S2)];
-        assert!(accel_l1(&b, &at_rest, &g, 1.0, 1.0, &mut PoseBatch::zeros(1, Order::Acceleration)) < 1e-12);
+        assert!(
+            accel_l1(
+                &b,
+                &at_rest,
+                &g,
+                1.0,
+                1.0,
+                &mut PoseBatch::zeros(1, Order::Acceleration)
+            ) < 1e-12
+        );
     }
 }

@@ -20,7 +20,7 @@ use cpose_core::eval::{self, Trajectory};
 use cpose_core::nn::{Adam, ExponentialDecay};
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
-use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange, Timestamp};
+use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -29,8 +29,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::euroc::EurocSequence;
 use crate::imu::ImuSample;
-use cpose_core::gravity_world;
 use crate::losses;
+use cpose_core::gravity_world;
 
 inventory::submit! {
     Task {
@@ -156,6 +156,8 @@ struct FitConfig {
     iterations: usize,
     /// IMU modes to compare: `"none"`, `"tight"`, `"accel"`, `"combined"`.
     imu: Vec<ImuMode>,
+    /// Weight of the pose loss (squared error of quaternions and of normalised positions).
+    pose_weight: f64,
     /// Weight of the gyroscope loss (paper: 1).
     gyro_weight: f64,
     /// Weight of the accelerometer loss (paper: 1).
@@ -175,15 +177,16 @@ struct FitConfig {
 impl Default for FitConfig {
     fn default() -> Self {
         Self {
-            iterations: 2000,
+            iterations: 3000,
             imu: vec![ImuMode::None, ImuMode::Tight],
+            pose_weight: 1.0,
             gyro_weight: 1.0,
             accel_weight: 1.0,
-            imu_batch: 256,
+            imu_batch: 64,
             lr_translation: 1e-3,
             lr_rotation: 2e-4,
             lr_pose: 1e-2,
-            lr_decay: 0.01,
+            lr_decay: 0.1,
         }
     }
 }
@@ -201,20 +204,39 @@ struct Sequence {
     imu: Vec<ImuSample>,
 }
 
-fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<(f64, Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>)> {
+/// A whole trajectory as read: absolute time of `t = 0`, times, poses and IMU readings.
+struct Loaded {
+    origin_secs: f64,
+    times: Vec<f64>,
+    poses: Vec<Isometry3<f64>>,
+    imu: Vec<ImuSample>,
+}
+
+fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded> {
     let path = || -> anyhow::Result<&PathBuf> {
-        data.path.as_ref().with_context(|| format!("{}: [data] source = {:?} needs a `path`", config.path().display(), data.source))
+        data.path.as_ref().with_context(|| {
+            format!(
+                "{}: [data] source = {:?} needs a `path`",
+                config.path().display(),
+                data.source
+            )
+        })
     };
     Ok(match data.source {
         Source::Synthetic => {
             if !(data.duration_secs > 0.0 && data.pose_rate_hz > 0.0 && data.imu_rate_hz > 0.0) {
-                bail!("{}: [data] duration_secs, pose_rate_hz and imu_rate_hz must be positive", config.path().display());
+                bail!(
+                    "{}: [data] duration_secs, pose_rate_hz and imu_rate_hz must be positive",
+                    config.path().display()
+                );
             }
             let range = TimeRange::new(0.0, data.duration_secs).context("duration")?;
             let motion = SinusoidMotion::<f64>::handheld(range, seed);
             let sample = |rate: f64| -> Vec<f64> {
                 let n = (data.duration_secs * rate).floor() as usize + 1;
-                (0..n).map(|k| (k as f64 / rate).min(data.duration_secs)).collect()
+                (0..n)
+                    .map(|k| (k as f64 / rate).min(data.duration_secs))
+                    .collect()
             };
             let times = sample(data.pose_rate_hz);
             let mut out = PoseBatch::default();
@@ -226,21 +248,43 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<(f64, V
             let imu = (0..imu_times.len())
                 .map(|i| {
                     let rotation = UnitQuaternion::new_normalize(out.rotation[i]);
-                    ImuSample { t_secs: imu_times[i], gyro: out.ang_vel_body(i), accel: rotation.inverse_transform_vector(&(out.lin_acc_world[i] - g)) }
+                    ImuSample {
+                        t_secs: imu_times[i],
+                        gyro: out.ang_vel_body(i),
+                        accel: rotation.inverse_transform_vector(&(out.lin_acc_world[i] - g)),
+                    }
                 })
                 .collect();
-            (0.0, times, poses, imu)
+            Loaded {
+                origin_secs: 0.0,
+                times,
+                poses,
+                imu,
+            }
         }
         Source::Tum => {
             let trajectory = eval::read_tum(path()?)?;
             let origin = trajectory.timestamps_secs()[0];
-            let times = trajectory.timestamps_secs().iter().map(|t| t - origin).collect();
-            (origin, times, trajectory.poses().to_vec(), Vec::new())
+            let times = trajectory
+                .timestamps_secs()
+                .iter()
+                .map(|t| t - origin)
+                .collect();
+            Loaded {
+                origin_secs: origin,
+                times,
+                poses: trajectory.poses().to_vec(),
+                imu: Vec::new(),
+            }
         }
         Source::Euroc => {
             let seq = EurocSequence::load(path()?)?;
             let origin = seq.ground_truth[0].stamp;
-            let times: Vec<f64> = seq.ground_truth.iter().map(|s| s.stamp.secs_since(origin)).collect();
+            let times: Vec<f64> = seq
+                .ground_truth
+                .iter()
+                .map(|s| s.stamp.secs_since(origin))
+                .collect();
             let poses = seq.ground_truth.iter().map(|s| s.world_from_body).collect();
             // Remove the ground-truth bias of the nearest state and express the readings in the
             // body frame (EuRoC's imu0 is the body frame: T_BS = I; a lever arm is not modelled).
@@ -252,10 +296,19 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<(f64, V
                     let t = s.stamp.secs_since(origin);
                     let k = times.partition_point(|&x| x < t).min(times.len() - 1);
                     let state = &seq.ground_truth[k];
-                    ImuSample { t_secs: t, gyro: imu_rotation * (s.gyro - state.gyro_bias), accel: imu_rotation * (s.accel - state.accel_bias) }
+                    ImuSample {
+                        t_secs: t,
+                        gyro: imu_rotation * (s.gyro - state.gyro_bias),
+                        accel: imu_rotation * (s.accel - state.accel_bias),
+                    }
                 })
                 .collect();
-            (Timestamp::as_secs_f64(origin), times, poses, imu)
+            Loaded {
+                origin_secs: origin.as_secs_f64(),
+                times,
+                poses,
+                imu,
+            }
         }
     })
 }
@@ -263,17 +316,31 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<(f64, V
 impl Sequence {
     fn new(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Self> {
         if data.known_every == 0 {
-            bail!("{}: [data] known_every must be at least 1", config.path().display());
+            bail!(
+                "{}: [data] known_every must be at least 1",
+                config.path().display()
+            );
         }
-        let (origin, times, poses, imu) = load(config, data, seed)?;
+        let Loaded {
+            origin_secs: origin,
+            times,
+            poses,
+            imu,
+        } = load(config, data, seed)?;
         let start = data.start_secs;
         let end = data.crop_secs.map_or(f64::INFINITY, |c| start + c);
-        let keep: Vec<usize> = (0..times.len()).filter(|&i| times[i] >= start && times[i] <= end).collect();
+        let keep: Vec<usize> = (0..times.len())
+            .filter(|&i| times[i] >= start && times[i] <= end)
+            .collect();
         // The fitted range ends at the last known pose, so no held-out pose is an extrapolation.
         let n_known = (keep.len().saturating_sub(1)) / data.known_every + 1;
         let keep = &keep[..((n_known - 1) * data.known_every + 1).min(keep.len())];
         if n_known < 4 || keep.len() < 2 {
-            bail!("{}: the cropped trajectory has {} poses and {n_known} known ones; at least 4 known poses are needed", config.path().display(), keep.len());
+            bail!(
+                "{}: the cropped trajectory has {} poses and {n_known} known ones; at least 4 known poses are needed",
+                config.path().display(),
+                keep.len()
+            );
         }
         let t0 = times[keep[0]];
         let t1 = times[keep[keep.len() - 1]];
@@ -284,12 +351,22 @@ impl Sequence {
             poses: keep.iter().map(|&i| poses[i]).collect(),
             known_times: known.iter().map(|&i| times[keep[i]] - t0).collect(),
             known,
-            imu: imu.into_iter().filter(|s| s.t_secs >= t0 && s.t_secs <= t1).map(|s| ImuSample { t_secs: s.t_secs - t0, ..s }).collect(),
+            imu: imu
+                .into_iter()
+                .filter(|s| s.t_secs >= t0 && s.t_secs <= t1)
+                .map(|s| ImuSample {
+                    t_secs: s.t_secs - t0,
+                    ..s
+                })
+                .collect(),
         })
     }
 
     fn range(&self) -> TimeRange {
-        TimeRange { start_secs: 0.0, end_secs: *self.times.last().expect("non-empty") }
+        TimeRange {
+            start_secs: 0.0,
+            end_secs: *self.times.last().expect("non-empty"),
+        }
     }
 
     fn held_out(&self) -> Vec<usize> {
@@ -299,26 +376,55 @@ impl Sequence {
     }
 }
 
-/// Maps positions into `[-1, 1]`-friendly coordinates: `p_n = (p − centre)/scale`.
+/// The frame the fields work in: `world_from_body_n = [R_refᵀ | −R_refᵀ c / s] · world_from_body`
+/// scaled, i.e. `p_n = R_refᵀ (p − c) / s` and `R_n = R_refᵀ R`. Centring and scaling keep
+/// PoseNet's tanh-bounded translation in range; the reference rotation (the mean of the known
+/// rotations) puts every field's identity start near the data, so no method starts up to 180°
+/// away from it.
 struct Normalisation {
     centre: Vector3<f64>,
     scale: f64,
+    world_from_field: UnitQuaternion<f64>,
 }
 
 impl Normalisation {
-    /// Centre of the bounding box of the known positions; scale 1.5× its largest half-extent.
-    fn fit(positions: impl Iterator<Item = Vector3<f64>> + Clone) -> Self {
-        let lo = positions.clone().fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(&p));
+    /// Centre of the bounding box of the known positions; scale 1.5× its largest half-extent;
+    /// the chordal mean of the known rotations (sign-aligned quaternions, averaged, normalised).
+    fn fit(poses: &[Isometry3<f64>]) -> Self {
+        let positions = poses.iter().map(|p| p.translation.vector);
+        let lo = positions
+            .clone()
+            .fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(&p));
         let hi = positions.fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(&p));
-        let centre = (lo + hi) / 2.0;
-        let scale = 1.5 * ((hi - lo) / 2.0).max().max(1e-3);
-        Self { centre, scale }
+        let first = *poses[0].rotation.quaternion();
+        let sum = poses
+            .iter()
+            .fold(nalgebra::Quaternion::new(0.0, 0.0, 0.0, 0.0), |acc, p| {
+                let q = *p.rotation.quaternion();
+                if q.coords.dot(&first.coords) < 0.0 {
+                    acc - q
+                } else {
+                    acc + q
+                }
+            });
+        Self {
+            centre: (lo + hi) / 2.0,
+            scale: 1.5 * ((hi - lo) / 2.0).max().max(1e-3),
+            world_from_field: UnitQuaternion::new_normalize(sum),
+        }
     }
-    fn to_field(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        Isometry3::from_parts(Translation3::from((pose.translation.vector - self.centre) / self.scale), pose.rotation)
+    fn to_field_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        let field_from_world = self.world_from_field.inverse();
+        let p = field_from_world * (pose.translation.vector - self.centre) / self.scale;
+        Isometry3::from_parts(Translation3::from(p), field_from_world * pose.rotation)
     }
-    fn from_field(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        Isometry3::from_parts(Translation3::from(pose.translation.vector * self.scale + self.centre), pose.rotation)
+    fn to_world_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        let p = self.world_from_field * pose.translation.vector * self.scale + self.centre;
+        Isometry3::from_parts(Translation3::from(p), self.world_from_field * pose.rotation)
+    }
+    /// Gravity in the field's frame.
+    fn gravity(&self) -> Vector3<f64> {
+        self.world_from_field.inverse() * gravity_world()
     }
 }
 
@@ -362,14 +468,19 @@ fn rms(errors: impl Iterator<Item = f64>) -> Option<f64> {
 /// that interpolation (constant between two known poses).
 fn interpolate(seq: &Sequence, t: f64) -> (Isometry3<f64>, Vector3<f64>) {
     let known_times = &seq.known_times;
-    let k = known_times.partition_point(|&x| x <= t).clamp(1, known_times.len() - 1);
+    let k = known_times
+        .partition_point(|&x| x <= t)
+        .clamp(1, known_times.len() - 1);
     let (a, b) = (&seq.poses[seq.known[k - 1]], &seq.poses[seq.known[k]]);
     let (ta, tb) = (known_times[k - 1], known_times[k]);
     let u = (t - ta) / (tb - ta);
     let rotation = a.rotation.slerp(&b.rotation, u);
     let translation = a.translation.vector.lerp(&b.translation.vector, u);
     let omega = (a.rotation.inverse() * b.rotation).scaled_axis() / (tb - ta);
-    (Isometry3::from_parts(Translation3::from(translation), rotation), omega)
+    (
+        Isometry3::from_parts(Translation3::from(translation), rotation),
+        omega,
+    )
 }
 
 /// Everything one fit needs, allocated once.
@@ -383,25 +494,50 @@ struct Fit<'a> {
 
 impl Fit<'_> {
     /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel`; returns the last loss.
-    fn run(&self, field: &mut dyn PoseField, mode: ImuMode, iterations: usize, seed: u64, mut tick: impl FnMut()) -> anyhow::Result<f64> {
+    fn run(
+        &self,
+        field: &mut dyn PoseField,
+        mode: ImuMode,
+        iterations: usize,
+        seed: u64,
+        mut tick: impl FnMut(),
+    ) -> anyhow::Result<f64> {
         let mut adam = Adam::<f32>::new(field.num_params());
         let mut grad = vec![0.0f32; field.num_params()];
         let (mut out, mut cot) = (PoseBatch::default(), PoseBatch::default());
         let batch = self.cfg.imu_batch.min(self.seq.imu.len()).max(1);
-        let (mut imu_times, mut gyro, mut accel) = (Vec::with_capacity(batch), Vec::with_capacity(batch), Vec::with_capacity(batch));
+        let (mut imu_times, mut gyro, mut accel) = (
+            Vec::with_capacity(batch),
+            Vec::with_capacity(batch),
+            Vec::with_capacity(batch),
+        );
         let mut imu_order = self.imu_order.clone();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut cursor = imu_order.len();
-        let decay = |lr: f64| ExponentialDecay { lr0: lr, lr_end: lr * self.cfg.lr_decay, max_iter: iterations as u64 };
-        let (lr_t, lr_r, lr_p) = (decay(self.cfg.lr_translation), decay(self.cfg.lr_rotation), decay(self.cfg.lr_pose));
-        let g = gravity_world();
+        let decay = |lr: f64| ExponentialDecay {
+            lr0: lr,
+            lr_end: lr * self.cfg.lr_decay,
+            max_iter: iterations as u64,
+        };
+        let (lr_t, lr_r, lr_p) = (
+            decay(self.cfg.lr_translation),
+            decay(self.cfg.lr_rotation),
+            decay(self.cfg.lr_pose),
+        );
+        let g = self.norm.gravity();
         let mut loss = f64::NAN;
         for it in 0..iterations {
             grad.fill(0.0);
             let n = self.seq.known_times.len();
             field.forward(&self.seq.known_times, Order::Pose, &mut out)?;
             cot.reset(n, Order::Pose);
-            loss = losses::pose_l2(&out, &self.known_targets, 1.0, 1.0, &mut cot);
+            loss = losses::pose_l2(
+                &out,
+                &self.known_targets,
+                self.cfg.pose_weight,
+                1.0,
+                &mut cot,
+            );
             field.backward(&self.seq.known_times, &cot, &mut grad)?;
             if mode != ImuMode::None {
                 imu_times.clear();
@@ -425,12 +561,21 @@ impl Fit<'_> {
                     loss += losses::gyro_tight_l1(&out, &gyro, self.cfg.gyro_weight, &mut cot);
                 }
                 if mode.accel() {
-                    loss += losses::accel_l1(&out, &accel, &g, self.norm.scale, self.cfg.accel_weight, &mut cot);
+                    loss += losses::accel_l1(
+                        &out,
+                        &accel,
+                        &g,
+                        self.norm.scale,
+                        self.cfg.accel_weight,
+                        &mut cot,
+                    );
                 }
                 field.backward(&imu_times, &cot, &mut grad)?;
             }
             if !loss.is_finite() || grad.iter().any(|x| !x.is_finite()) {
-                bail!("the loss or its gradient became {loss} at iteration {it}; stopping this fit");
+                bail!(
+                    "the loss or its gradient became {loss} at iteration {it}; stopping this fit"
+                );
             }
             let step = it as u64;
             adam.step_pose_field(field, &grad, |kind| match kind {
@@ -450,18 +595,27 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let seed = input.run.seed;
     let seq = Sequence::new(config, &exp.data, seed)?;
     if seq.imu.is_empty() && exp.fit.imu.iter().any(|m| *m != ImuMode::None) {
-        bail!("{}: [fit] imu = {:?} needs IMU data, but source {:?} has none; use imu = [\"none\"]", config.path().display(), exp.fit.imu, exp.data.source);
+        bail!(
+            "{}: [fit] imu = {:?} needs IMU data, but source {:?} has none; use imu = [\"none\"]",
+            config.path().display(),
+            exp.fit.imu,
+            exp.data.source
+        );
     }
     if exp.fields.is_empty() {
-        bail!("{}: no pose fields to fit; add a table such as [fields.posenet] with kind = \"posenet\"", config.path().display());
+        bail!(
+            "{}: no pose fields to fit; add a table such as [fields.posenet] with kind = \"posenet\"",
+            config.path().display()
+        );
     }
-    let norm = Normalisation::fit(seq.known.iter().map(|&i| seq.poses[i].translation.vector));
+    let known_poses: Vec<Isometry3<f64>> = seq.known.iter().map(|&i| seq.poses[i]).collect();
+    let norm = Normalisation::fit(&known_poses);
     let held_out = seq.held_out();
     let held_times: Vec<f64> = held_out.iter().map(|&i| seq.times[i]).collect();
     let held_truth: Vec<Isometry3<f64>> = held_out.iter().map(|&i| seq.poses[i]).collect();
     let imu_times: Vec<f64> = seq.imu.iter().map(|s| s.t_secs).collect();
-    input.run_dir.log(&format!(
-        "{} poses over {:.2} s, {} known (every {}), {} held out, {} IMU samples; positions normalised by centre {:.3?} and scale {:.3} m",
+    input.run_dir.log(format_args!(
+        "{} poses over {:.2} s, {} known (every {}), {} held out, {} IMU samples; fields work in a frame centred at {:.3?} m, scaled by 1/{:.3} m",
         seq.times.len(),
         seq.range().end_secs,
         seq.known.len(),
@@ -472,40 +626,65 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         norm.scale
     ));
 
-    let write_trajectory = |name: &str, times: &[f64], poses: Vec<Isometry3<f64>>| -> anyhow::Result<()> {
-        let absolute = times.iter().map(|t| t + seq.origin_secs).collect();
-        let trajectory = Trajectory::new(absolute, poses)?;
-        eval::write_tum(input.run_dir.path().join(name), &trajectory)?;
-        Ok(())
-    };
+    let write_trajectory =
+        |name: &str, times: &[f64], poses: Vec<Isometry3<f64>>| -> anyhow::Result<()> {
+            let absolute = times.iter().map(|t| t + seq.origin_secs).collect();
+            let trajectory = Trajectory::new(absolute, poses)?;
+            eval::write_tum(input.run_dir.path().join(name), &trajectory)?;
+            Ok(())
+        };
     write_trajectory("gt.txt", &seq.times, seq.poses.clone())?;
     let known_times = &seq.known_times;
-    write_trajectory("known.txt", known_times, seq.known.iter().map(|&i| seq.poses[i]).collect())?;
+    write_trajectory("known.txt", known_times, known_poses.clone())?;
 
     let mut metrics: BTreeMap<&str, BTreeMap<String, MethodMetrics>> = BTreeMap::new();
     // Reference: interpolation of the known poses.
     let started = Instant::now();
     let interp: Vec<Isometry3<f64>> = held_times.iter().map(|&t| interpolate(&seq, t).0).collect();
     let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&interp, &held_truth);
-    let ang_vel = rms(seq.imu.iter().map(|s| (interpolate(&seq, s.t_secs).1 - s.gyro).norm()));
+    let ang_vel = rms(seq
+        .imu
+        .iter()
+        .map(|s| (interpolate(&seq, s.t_secs).1 - s.gyro).norm()));
     metrics.entry(ImuMode::None.key()).or_default().insert(
         "interp".into(),
-        MethodMetrics { rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m, ang_vel_rmse_rad_s: ang_vel, held_out_poses: held_out.len(), num_params: None, final_loss: None, wall_s: started.elapsed().as_secs_f64() },
+        MethodMetrics {
+            rot_err_deg,
+            rot_rmse_deg,
+            trans_err_m,
+            trans_rmse_m,
+            ang_vel_rmse_rad_s: ang_vel,
+            held_out_poses: held_out.len(),
+            num_params: None,
+            final_loss: None,
+            wall_s: started.elapsed().as_secs_f64(),
+        },
     );
-    write_trajectory("est_interp.txt", &seq.times, seq.times.iter().map(|&t| interpolate(&seq, t).0).collect())?;
+    write_trajectory(
+        "est_interp.txt",
+        &seq.times,
+        seq.times.iter().map(|&t| interpolate(&seq, t).0).collect(),
+    )?;
 
     let fit = Fit {
         seq: &seq,
         norm: &norm,
         cfg: &exp.fit,
-        known_targets: seq.known.iter().map(|&i| norm.to_field(&seq.poses[i])).collect(),
+        known_targets: known_poses.iter().map(|p| norm.to_field_frame(p)).collect(),
         imu_order: (0..seq.imu.len()).collect(),
     };
     let iterations = input.run.iterations(exp.fit.iterations);
     let mut modes = exp.fit.imu.clone();
     modes.dedup();
-    let progress = input.progress((iterations * modes.len() * exp.fields.len()) as u64, "fitting");
-    let ctx = FieldContext { time_range: seq.range(), frame_times_secs: known_times.clone(), seed };
+    let progress = input.progress(
+        (iterations * modes.len() * exp.fields.len()) as u64,
+        "fitting",
+    );
+    let ctx = FieldContext {
+        time_range: seq.range(),
+        frame_times_secs: known_times.clone(),
+        seed,
+    };
     for &mode in &modes {
         for name in exp.fields.keys() {
             let section = config.section(&format!("fields.{name}"));
@@ -517,17 +696,24 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             let wall_s = started.elapsed().as_secs_f64();
             let mut out = PoseBatch::default();
             field.evaluate(&seq.times, Order::Pose, &mut out)?;
-            let all: Vec<Isometry3<f64>> = (0..seq.times.len()).map(|i| norm.from_field(&out.world_from_body(i))).collect();
+            let all: Vec<Isometry3<f64>> = (0..seq.times.len())
+                .map(|i| norm.to_world_frame(&out.world_from_body(i)))
+                .collect();
             let estimated: Vec<Isometry3<f64>> = held_out.iter().map(|&i| all[i]).collect();
-            let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&estimated, &held_truth);
+            let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) =
+                pose_errors(&estimated, &held_truth);
             let ang_vel_rmse_rad_s = if imu_times.is_empty() {
                 None
             } else {
                 field.evaluate(&imu_times, Order::Velocity, &mut out)?;
-                rms(seq.imu.iter().enumerate().map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
+                rms(seq
+                    .imu
+                    .iter()
+                    .enumerate()
+                    .map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
             };
             write_trajectory(&format!("est_{}_{name}.txt", mode.key()), &seq.times, all)?;
-            input.run_dir.log(&format!(
+            input.run_dir.log(format_args!(
                 "imu={:<8} {name:<12} rot {rot_err_deg:8.4}° trans {:8.3} cm  ω-rmse {}  loss {final_loss:.3e}  {wall_s:.1} s",
                 mode.key(),
                 trans_err_m * 100.0,
@@ -535,7 +721,17 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             ));
             metrics.entry(mode.key()).or_default().insert(
                 name.clone(),
-                MethodMetrics { rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m, ang_vel_rmse_rad_s, held_out_poses: held_out.len(), num_params: Some(field.num_params()), final_loss: Some(final_loss), wall_s },
+                MethodMetrics {
+                    rot_err_deg,
+                    rot_rmse_deg,
+                    trans_err_m,
+                    trans_rmse_m,
+                    ang_vel_rmse_rad_s,
+                    held_out_poses: held_out.len(),
+                    num_params: Some(field.num_params()),
+                    final_loss: Some(final_loss),
+                    wall_s,
+                },
             );
         }
     }
@@ -547,11 +743,20 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
 
 /// The held-out errors as a text table, one row per (IMU mode, method).
 fn summary_table(metrics: &BTreeMap<&str, BTreeMap<String, MethodMetrics>>) -> String {
-    let mut s = format!("\n{:<10} {:<12} {:>12} {:>12} {:>14}\n", "imu", "method", "rot [deg]", "trans [cm]", "ω rmse [rad/s]");
+    let mut s = format!(
+        "\n{:<10} {:<12} {:>12} {:>12} {:>14}\n",
+        "imu", "method", "rot [deg]", "trans [cm]", "ω rmse [rad/s]"
+    );
     for (mode, methods) in metrics {
         for (name, m) in methods {
-            let w = m.ang_vel_rmse_rad_s.map_or("-".to_owned(), |w| format!("{w:.4}"));
-            s.push_str(&format!("{mode:<10} {name:<12} {:>12.4} {:>12.3} {w:>14}\n", m.rot_err_deg, m.trans_err_m * 100.0));
+            let w = m
+                .ang_vel_rmse_rad_s
+                .map_or("-".to_owned(), |w| format!("{w:.4}"));
+            s.push_str(&format!(
+                "{mode:<10} {name:<12} {:>12.4} {:>12.3} {w:>14}\n",
+                m.rot_err_deg,
+                m.trans_err_m * 100.0
+            ));
         }
     }
     s

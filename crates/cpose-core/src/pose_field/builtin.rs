@@ -21,7 +21,11 @@ fn posenet(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseFiel
     let mut config: PoseNetConfig = section.decode_params()?;
     // The table's `seed` offsets the run's seed, so `[run] seed` varies every field of a run.
     config.seed = config.seed.wrapping_add(ctx.seed);
-    Ok(Box::new(config.init::<f32>(ctx.time_range).map_err(located(section))?))
+    Ok(Box::new(
+        config
+            .init::<f32>(ctx.time_range)
+            .map_err(located(section))?,
+    ))
 }
 
 fn discrete(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField>, ConfigError> {
@@ -45,9 +49,17 @@ fn default_control_points() -> usize {
     SplineConfig::default().control_points
 }
 
-fn spline_of(kind: SplineKind, section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField>, ConfigError> {
+fn spline_of(
+    kind: SplineKind,
+    section: &Section<'_>,
+    ctx: &FieldContext,
+) -> Result<Box<dyn PoseField>, ConfigError> {
     let table: SplineTable = section.decode_params()?;
-    let config = SplineConfig { kind, control_points: table.control_points, knot_spacing_secs: table.knot_spacing_secs };
+    let config = SplineConfig {
+        kind,
+        control_points: table.control_points,
+        knot_spacing_secs: table.knot_spacing_secs,
+    };
     let field = config.init::<f32>(ctx.time_range, &ctx.frame_times_secs);
     Ok(Box::new(field.map_err(located(section))?))
 }
@@ -56,7 +68,10 @@ fn spline(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField
     spline_of(SplineKind::PerDimension, section, ctx)
 }
 
-fn lie_spline(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField>, ConfigError> {
+fn lie_spline(
+    section: &Section<'_>,
+    ctx: &FieldContext,
+) -> Result<Box<dyn PoseField>, ConfigError> {
     spline_of(SplineKind::Lie, section, ctx)
 }
 
@@ -72,7 +87,11 @@ struct ComposedTable {
 
 fn composed(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField>, ConfigError> {
     let _: ComposedTable = section.decode_params()?;
-    let part = |name: &str| section.config().section(&format!("{}.{name}", section.dotted_path()));
+    let part = |name: &str| {
+        section
+            .config()
+            .section(&format!("{}.{name}", section.dotted_path()))
+    };
     let a = build_pose_field(&part("a"), ctx)?;
     let b = build_pose_field(&part("b"), ctx)?;
     Ok(Box::new(Composed::new(a, b).map_err(located(section))?))
@@ -101,7 +120,11 @@ mod tests {
     use crate::{Order, PoseBatch, TimeRange};
 
     fn ctx() -> FieldContext {
-        FieldContext { time_range: TimeRange::new(0.0, 2.0).unwrap(), frame_times_secs: vec![0.0, 0.5, 1.0, 1.5, 2.0], seed: 3 }
+        FieldContext {
+            time_range: TimeRange::new(0.0, 2.0).unwrap(),
+            frame_times_secs: vec![0.0, 0.5, 1.0, 1.5, 2.0],
+            seed: 3,
+        }
     }
 
     #[test]
@@ -135,7 +158,9 @@ skip_layer = 0
         for name in ["p", "d", "s", "l", "c"] {
             let mut field = build_pose_field(&config.section(name), &ctx()).unwrap();
             let mut out = PoseBatch::default();
-            field.forward(&[0.0, 0.7, 2.0], Order::Acceleration, &mut out).unwrap();
+            field
+                .forward(&[0.0, 0.7, 2.0], Order::Acceleration, &mut out)
+                .unwrap();
             assert_eq!(out.len(), 3, "{name}");
             assert!(field.num_params() > 0, "{name}");
         }
@@ -147,12 +172,27 @@ skip_layer = 0
 
     #[test]
     fn bad_tables_are_located_errors() {
-        let config = Config::from_text("test.toml", "task = \"none\"\n[p]\nkind = \"posenet\"\nwidht = 3\n[q]\nkind = \"posenet\"\nbands = 99\n[s]\nkind = \"spline\"\ncontrol_points = 2\n");
-        let err = build_pose_field(&config.section("p"), &ctx()).err().unwrap().to_string();
-        assert!(err.contains("line 4") && err.contains("widht") && err.contains("width"), "{err}");
-        let err = build_pose_field(&config.section("q"), &ctx()).err().unwrap().to_string();
+        let config = Config::from_text(
+            "test.toml",
+            "task = \"none\"\n[p]\nkind = \"posenet\"\nwidht = 3\n[q]\nkind = \"posenet\"\nbands = 99\n[s]\nkind = \"spline\"\ncontrol_points = 2\n",
+        );
+        let err = build_pose_field(&config.section("p"), &ctx())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains("line 4") && err.contains("widht") && err.contains("width"),
+            "{err}"
+        );
+        let err = build_pose_field(&config.section("q"), &ctx())
+            .err()
+            .unwrap()
+            .to_string();
         assert!(err.contains("bands = 99"), "{err}");
-        let err = build_pose_field(&config.section("s"), &ctx()).err().unwrap().to_string();
+        let err = build_pose_field(&config.section("s"), &ctx())
+            .err()
+            .unwrap()
+            .to_string();
         assert!(err.contains("[s]") && err.contains("test.toml"), "{err}");
     }
 }
