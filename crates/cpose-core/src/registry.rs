@@ -4,16 +4,31 @@
 //! `cpose` binary (and every integration test) names the crate with `use cpose_x as _;` so that
 //! the registration is linked. Lists are sorted by name, since `inventory` gives no order.
 //!
-//! ```ignore
-//! // A task: one function that decodes its own tables.
-//! inventory::submit! { Task { name: "trajectory", about: "fit a pose field to a trajectory", run } }
+//! ```no_run
+//! use cpose_core::TimeRange;
+//! use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
 //!
+//! #[derive(serde::Deserialize)]
+//! #[serde(deny_unknown_fields)]
+//! struct Params {
+//!     /// Seconds covered by the field.
+//!     duration_secs: f64,
+//!     /// Decoded by the pose-field registry.
+//!     #[allow(dead_code)]
+//!     model: serde::de::IgnoredAny,
+//! }
+//!
+//! /// A task: one function that decodes its own keys; `[model]` picks a pose field by `kind`.
 //! fn run(input: &TaskInput) -> anyhow::Result<()> {
-//!     let params: Params = input.config.parse_params()?;          // deny_unknown_fields
-//!     let field = build_pose_field(&input.config.section("model"), &ctx)?;
-//!     input.run_dir.write_json("metrics.json", &metrics)?;
+//!     let params: Params = input.config.parse_params()?; // a typo names line, column, valid keys
+//!     let time_range = TimeRange::new(0.0, params.duration_secs).expect("positive duration");
+//!     let ctx = FieldContext { time_range, frame_times_secs: Vec::new(), seed: input.run.seed };
+//!     let field = build_pose_field(&input.config.section("model"), &ctx)?; // kind = "posenet"
+//!     input.run_dir.write_json("metrics.json", &field.num_params())?;
 //!     Ok(())
 //! }
+//!
+//! inventory::submit! { Task { name: "count_params", about: "build a pose field and count its parameters", run } }
 //! ```
 
 use std::collections::BTreeSet;

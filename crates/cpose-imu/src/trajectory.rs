@@ -44,11 +44,6 @@ inventory::submit! {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Experiment {
-    #[allow(dead_code, reason = "read by the registry")]
-    task: String,
-    #[serde(default)]
-    #[allow(dead_code, reason = "decoded by the CLI")]
-    run: serde::de::IgnoredAny,
     data: DataConfig,
     #[serde(default)]
     fit: FitConfig,
@@ -376,26 +371,20 @@ impl Sequence {
     }
 }
 
-/// The frame the fields work in: `world_from_body_n = [R_refᵀ | −R_refᵀ c / s] · world_from_body`
-/// scaled, i.e. `p_n = R_refᵀ (p − c) / s` and `R_n = R_refᵀ R`. Centring and scaling keep
-/// PoseNet's tanh-bounded translation in range; the reference rotation (the mean of the known
-/// rotations) puts every field's identity start near the data, so no method starts up to 180°
-/// away from it.
+/// The frame the fields work in: `R_n = R_refᵀ R` and `p_n = (R_refᵀ p − c) / s`. The reference
+/// rotation (the mean of the known rotations) puts every field's identity start near the data,
+/// so no method starts up to 180° away from it; centring and scaling (the bounding box of the
+/// known positions in that frame, scaled by 1.5× its largest half-extent) keep PoseNet's
+/// tanh-bounded translation in range.
 struct Normalisation {
+    world_from_field: UnitQuaternion<f64>,
     centre: Vector3<f64>,
     scale: f64,
-    world_from_field: UnitQuaternion<f64>,
 }
 
 impl Normalisation {
-    /// Centre of the bounding box of the known positions; scale 1.5× its largest half-extent;
-    /// the chordal mean of the known rotations (sign-aligned quaternions, averaged, normalised).
     fn fit(poses: &[Isometry3<f64>]) -> Self {
-        let positions = poses.iter().map(|p| p.translation.vector);
-        let lo = positions
-            .clone()
-            .fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(&p));
-        let hi = positions.fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(&p));
+        // Chordal mean: sign-aligned quaternions, averaged, normalised.
         let first = *poses[0].rotation.quaternion();
         let sum = poses
             .iter()
@@ -407,19 +396,27 @@ impl Normalisation {
                     acc + q
                 }
             });
+        let world_from_field = UnitQuaternion::new_normalize(sum);
+        let rotated = poses
+            .iter()
+            .map(|p| world_from_field.inverse_transform_vector(&p.translation.vector));
+        let lo = rotated
+            .clone()
+            .fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(&p));
+        let hi = rotated.fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(&p));
         Self {
+            world_from_field,
             centre: (lo + hi) / 2.0,
             scale: 1.5 * ((hi - lo) / 2.0).max().max(1e-3),
-            world_from_field: UnitQuaternion::new_normalize(sum),
         }
     }
     fn to_field_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
         let field_from_world = self.world_from_field.inverse();
-        let p = field_from_world * (pose.translation.vector - self.centre) / self.scale;
+        let p = (field_from_world * pose.translation.vector - self.centre) / self.scale;
         Isometry3::from_parts(Translation3::from(p), field_from_world * pose.rotation)
     }
     fn to_world_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        let p = self.world_from_field * pose.translation.vector * self.scale + self.centre;
+        let p = self.world_from_field * (pose.translation.vector * self.scale + self.centre);
         Isometry3::from_parts(Translation3::from(p), self.world_from_field * pose.rotation)
     }
     /// Gravity in the field's frame.
@@ -591,7 +588,7 @@ impl Fit<'_> {
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let config = input.config;
-    let exp: Experiment = config.parse()?;
+    let exp: Experiment = config.parse_params()?;
     let seed = input.run.seed;
     let seq = Sequence::new(config, &exp.data, seed)?;
     if seq.imu.is_empty() && exp.fit.imu.iter().any(|m| *m != ImuMode::None) {
@@ -615,7 +612,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let held_truth: Vec<Isometry3<f64>> = held_out.iter().map(|&i| seq.poses[i]).collect();
     let imu_times: Vec<f64> = seq.imu.iter().map(|s| s.t_secs).collect();
     input.run_dir.log(format_args!(
-        "{} poses over {:.2} s, {} known (every {}), {} held out, {} IMU samples; fields work in a frame centred at {:.3?} m, scaled by 1/{:.3} m",
+        "{} poses over {:.2} s, {} known (every {}), {} held out, {} IMU samples; fields work in a frame rotated to the mean known orientation, centred at {:.3?} m in it and scaled by 1/{:.3} m",
         seq.times.len(),
         seq.range().end_secs,
         seq.known.len(),
@@ -760,4 +757,91 @@ fn summary_table(metrics: &BTreeMap<&str, BTreeMap<String, MethodMetrics>>) -> S
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn synthetic(known_every: usize) -> (Config, DataConfig) {
+        let config = Config::from_text("test.toml", "task = \"trajectory\"\n");
+        let data = DataConfig {
+            source: Source::Synthetic,
+            path: None,
+            duration_secs: 4.0,
+            pose_rate_hz: 50.0,
+            imu_rate_hz: 200.0,
+            start_secs: 0.5,
+            crop_secs: Some(3.0),
+            known_every,
+        };
+        (config, data)
+    }
+
+    #[test]
+    fn cropping_keeps_first_and_last_pose_known_and_imu_inside() {
+        let (config, data) = synthetic(7);
+        let seq = Sequence::new(&config, &data, 0).unwrap();
+        // 0.5..3.5 s at 50 Hz is 151 poses; the range ends at the last known one (index 147).
+        assert_eq!(seq.times.len(), 148);
+        assert_eq!(seq.known.first(), Some(&0));
+        assert_eq!(seq.known.last(), Some(&147));
+        assert_eq!(seq.known.len(), 22);
+        assert_eq!(seq.held_out().len(), 148 - 22);
+        assert!((seq.origin_secs - 0.5).abs() < 1e-12);
+        let end = seq.range().end_secs;
+        assert!(seq.imu.iter().all(|s| s.t_secs >= 0.0 && s.t_secs <= end));
+        assert!(seq.imu.len() > 580);
+    }
+
+    #[test]
+    fn synthetic_imu_is_exact_for_the_true_motion() {
+        // The losses vanish on the motion the readings were simulated from.
+        let range = TimeRange::new(0.0, 4.0).unwrap();
+        let motion = SinusoidMotion::<f64>::handheld(range, 0);
+        let (config, mut data) = synthetic(5);
+        data.start_secs = 0.0;
+        data.crop_secs = None;
+        let seq = Sequence::new(&config, &data, 0).unwrap();
+        let times: Vec<f64> = seq.imu.iter().map(|s| s.t_secs).collect();
+        let mut out = PoseBatch::default();
+        motion
+            .evaluate(&times, Order::Acceleration, &mut out)
+            .unwrap();
+        let gyro: Vec<_> = seq.imu.iter().map(|s| s.gyro).collect();
+        let accel: Vec<_> = seq.imu.iter().map(|s| s.accel).collect();
+        let mut cot = PoseBatch::zeros(times.len(), Order::Acceleration);
+        assert!(losses::gyro_tight_l1(&out, &gyro, 1.0, &mut cot) < 1e-12);
+        assert!(losses::accel_l1(&out, &accel, &gravity_world(), 1.0, 1.0, &mut cot) < 1e-12);
+        // Hand-held motion adds a few m/s² to gravity's 9.81.
+        let mean_norm = accel.iter().map(|a| a.norm()).sum::<f64>() / accel.len() as f64;
+        assert!((mean_norm - 9.81).abs() < 2.0, "{mean_norm}");
+    }
+
+    #[test]
+    fn normalisation_round_trips_and_interpolation_hits_known_poses() {
+        let (config, data) = synthetic(10);
+        let seq = Sequence::new(&config, &data, 0).unwrap();
+        let known: Vec<_> = seq.known.iter().map(|&i| seq.poses[i]).collect();
+        let norm = Normalisation::fit(&known);
+        for pose in &known {
+            // Known positions land inside [-1/1.5, 1/1.5], well within PoseNet's tanh range.
+            assert!(norm.to_field_frame(pose).translation.vector.amax() <= 1.0 / 1.5 + 1e-12);
+        }
+        for pose in &seq.poses {
+            let back = norm.to_world_frame(&norm.to_field_frame(pose));
+            assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
+            assert!(back.rotation.angle_to(&pose.rotation) < 1e-12);
+        }
+        for (&i, &t) in seq.known.iter().zip(&seq.known_times) {
+            let (pose, _) = interpolate(&seq, t);
+            assert!((pose.translation.vector - seq.poses[i].translation.vector).norm() < 1e-12);
+        }
+        // Halfway between two known poses: the slerp midpoint.
+        let (a, b) = (&seq.poses[seq.known[3]], &seq.poses[seq.known[4]]);
+        let (mid, omega) = interpolate(&seq, (seq.known_times[3] + seq.known_times[4]) / 2.0);
+        assert!(mid.rotation.angle_to(&a.rotation.slerp(&b.rotation, 0.5)) < 1e-12);
+        let dt = seq.known_times[4] - seq.known_times[3];
+        assert!(((a.rotation.inverse() * b.rotation).angle() - omega.norm() * dt).abs() < 1e-12);
+    }
 }

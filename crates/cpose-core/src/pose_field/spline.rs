@@ -699,7 +699,7 @@ impl<S: Real> PoseField<S> for LieSplinePoses<S> {
     /// Recomputes each evaluation (no state from `forward`). The rotation is differentiated in
     /// two stages: per segment (cached for the call) `∂(q_0, φ)/∂r` by forward-mode AD over the
     /// 12 local rotation-vector values, per time `∂q/∂(q_0, φ)` (see `SegmentJacobian`); the
-    /// translation is linear in the control translations ([`translation_weights`]).
+    /// translation is linear in the control translations (`translation_weights`).
     fn backward(
         &mut self,
         times_secs: &[f64],
