@@ -753,6 +753,34 @@ mod tests {
         }
     }
 
+    /// The shared conformance suite on the smooth variants (ReLU's derivatives jump at kinks,
+    /// which central differences across a kink cannot match; its tangents are checked above and
+    /// below away from kinks). F = 5 bands over 5 s give periods down to 0.31 s, so the
+    /// time-derivative tolerance allows the suite's O(h²) truncation at h = 5e-4 s.
+    #[test]
+    fn conformance_suite() {
+        let tol = crate::testing::Tolerances {
+            time_derivative: 1e-4,
+            ..Default::default()
+        };
+        for config in [
+            small(Activation::Softplus),
+            PoseNetConfig {
+                coupled: true,
+                ..small(Activation::Tanh)
+            },
+            PoseNetConfig {
+                encoding: Encoding::Linear,
+                skip_layer: 0,
+                ..small(Activation::Softplus)
+            },
+        ] {
+            let mut net = config.init::<f64>(range()).expect("valid config");
+            perturb(&mut net, 9);
+            crate::testing::check_pose_field_with(&mut net, &TIMES, &tol);
+        }
+    }
+
     #[test]
     fn time_derivatives_softplus() {
         check_time_derivatives(small(Activation::Softplus));
