@@ -151,9 +151,9 @@ struct FitConfig {
     iterations: usize,
     /// IMU modes to compare: `"none"`, `"tight"`, `"accel"`, `"combined"`.
     imu: Vec<ImuMode>,
-    /// Weight of the pose loss (squared error of quaternions and of normalised positions; about
-    /// 1e-4 at 1° of rotation error, against an L1 gyro residual of about 0.1 rad/s on real
-    /// data, hence the default 1000).
+    /// Weight of the pose loss (squared error of quaternions and of normalised positions: about
+    /// 1e-4 at 1° of rotation error). Against the L1 gyro residual of real data (about 0.1 rad/s
+    /// of noise and vibration) a weight near 1000 balances the two; exact IMU readings want 1.
     pose_weight: f64,
     /// Weight of the gyroscope loss (paper: 1).
     gyro_weight: f64,
@@ -176,7 +176,7 @@ impl Default for FitConfig {
         Self {
             iterations: 3000,
             imu: vec![ImuMode::None, ImuMode::Tight],
-            pose_weight: 1000.0,
+            pose_weight: 1.0,
             gyro_weight: 1.0,
             accel_weight: 1.0,
             imu_batch: 64,
