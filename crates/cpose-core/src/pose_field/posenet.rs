@@ -359,7 +359,13 @@ impl<S: Real> PoseNet<S> {
         check_times(&self.range, times)?;
         let n = times.len();
         let streams = order as usize + 1;
-        let parts = nn::batch_parts(n * streams);
+        // Two threads go to the two networks of the decoupled PoseNet (equal work, no partial
+        // gradients to add); the coupled one splits its batch instead.
+        let parts = if self.nets.len() > 1 && rayon::current_num_threads() > 1 {
+            1
+        } else {
+            nn::batch_parts(n * streams)
+        };
         if ws.parts.len() < parts {
             ws.parts.resize_with(parts, Part::default);
         }
@@ -382,8 +388,16 @@ impl<S: Real> PoseNet<S> {
             self.embedding.encode(&part.x, b, streams, &mut part.embed);
             part.nets
                 .resize_with(self.nets.len(), MlpWorkspace::default);
-            for (mlp, w) in self.nets.iter().zip(&mut part.nets) {
-                mlp.forward(&part.embed, b, streams, w);
+            let embed = &part.embed;
+            if parts == 1 && self.nets.len() > 1 {
+                self.nets
+                    .par_iter()
+                    .zip(part.nets.par_iter_mut())
+                    .for_each(|(mlp, w)| mlp.forward(embed, b, streams, w));
+            } else {
+                for (mlp, w) in self.nets.iter().zip(&mut part.nets) {
+                    mlp.forward(embed, b, streams, w);
+                }
             }
         };
         if parts == 1 {
@@ -572,7 +586,34 @@ impl<S: Real> PoseField<S> for PoseNet<S> {
         let (first, rest) = self.ws.parts[..parts]
             .split_first_mut()
             .expect("at least one part");
-        if rest.is_empty() {
+        if let ([translation, rotation], true) = (&nets[..], rest.is_empty()) {
+            // Decoupled, one part: the two networks run in parallel on their own gradient slices.
+            let (g_translation, g_rotation) = param_grad.split_at_mut(translation.num_params());
+            let (w_translation, w_rotation) = first.nets.split_at_mut(1);
+            let (embed, gout) = (&first.embed, &first.gout);
+            rayon::join(
+                || {
+                    translation.backward(
+                        embed,
+                        &mut w_translation[0],
+                        &gout[0],
+                        g_translation,
+                        Accum::Add,
+                        None,
+                    )
+                },
+                || {
+                    rotation.backward(
+                        embed,
+                        &mut w_rotation[0],
+                        &gout[1],
+                        g_rotation,
+                        Accum::Add,
+                        None,
+                    )
+                },
+            );
+        } else if rest.is_empty() {
             backward_part(first, param_grad, Accum::Add);
         } else {
             rayon::join(
@@ -941,9 +982,25 @@ mod tests {
         ));
     }
 
-    /// The batch split over threads (parts summed) gives the single-thread result.
+    /// Two threads (the decoupled networks in parallel, or the coupled network's batch split
+    /// with its parts summed) give the single-thread result.
     #[test]
-    fn batch_split_matches_single_part() {
+    fn parallel_paths_match_single_thread() {
+        for (config, parts) in [
+            (small(Activation::Softplus), 1),
+            (
+                PoseNetConfig {
+                    coupled: true,
+                    ..small(Activation::Softplus)
+                },
+                2,
+            ),
+        ] {
+            check_parallel_matches_single_thread(config, parts);
+        }
+    }
+
+    fn check_parallel_matches_single_thread(config: PoseNetConfig, parts_with_two_threads: usize) {
         let ts: Vec<f64> = (0..300).map(|i| 1.0 + 5.0 * i as f64 / 299.0).collect();
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
@@ -951,9 +1008,7 @@ mod tests {
                 .build()
                 .expect("pool");
             pool.install(|| {
-                let mut net = small(Activation::Softplus)
-                    .init::<f64>(range())
-                    .expect("valid");
+                let mut net = config.init::<f64>(range()).expect("valid");
                 perturb(&mut net, 4);
                 let mut out = PoseBatch::default();
                 net.forward(&ts, Order::Acceleration, &mut out)
@@ -965,7 +1020,7 @@ mod tests {
         };
         let (parts1, out1, g1) = run(1);
         let (parts2, out2, g2) = run(2);
-        assert_eq!((parts1, parts2), (1, 2));
+        assert_eq!((parts1, parts2), (1, parts_with_two_threads));
         assert!(
             out1.rotation_acc
                 .iter()
