@@ -698,7 +698,7 @@ width = 128
                 "run.seed=9",
                 "model.width=64",
                 "model.kind=spline",
-                "run.out_dir=/tmp/a b",
+                "run.out_dir=out/a b",
                 "new.deep.x=[1, 2]",
             ])
             .unwrap();
@@ -709,7 +709,7 @@ width = 128
         assert!(text.contains("kind = \"spline\""), "{text}");
         let run = c.run_config().unwrap();
         assert_eq!(run.seed, 9);
-        assert_eq!(run.out_dir, Some(PathBuf::from("/tmp/a b")));
+        assert_eq!(run.out_dir, Some(PathBuf::from("out/a b")));
         #[derive(Deserialize)]
         struct Deep {
             x: Vec<i64>,
