@@ -7,8 +7,9 @@
 //! field named in `[fields.NAME]` is fitted once per IMU mode; slerp/linear interpolation of the
 //! known poses is the reference (`interp`).
 //!
-//! Positions are fitted in normalised coordinates `p_n = (p − c)/s` (PoseNet's translation head
-//! is bounded by tanh); errors are reported in metres.
+//! Fields work in a normalised frame (rotated to the mean known orientation, centred and scaled
+//! so that PoseNet's tanh-bounded translation fits; see `Normalisation`); errors are reported in
+//! degrees and metres of the original world.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
