@@ -445,23 +445,26 @@ struct MethodMetrics {
     wall_s: f64,
 }
 
-fn pose_errors(estimated: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> (f64, f64, f64, f64) {
-    let n = truth.len() as f64;
-    let (mut r1, mut r2, mut t1, mut t2) = (0.0, 0.0, 0.0, 0.0);
-    for (e, g) in estimated.iter().zip(truth) {
-        let r = e.rotation.angle_to(&g.rotation).to_degrees();
-        let t = (e.translation.vector - g.translation.vector).norm();
-        r1 += r;
-        r2 += r * r;
-        t1 += t;
-        t2 += t * t;
-    }
-    (r1 / n, (r2 / n).sqrt(), t1 / n, (t2 / n).sqrt())
+/// Mean and RMSE of the rotation (degrees) and translation (metres) errors: evo's APE
+/// rotation-angle and translation parts, without alignment.
+fn pose_errors(
+    estimated: &[Isometry3<f64>],
+    truth: &[Isometry3<f64>],
+) -> anyhow::Result<(f64, f64, f64, f64)> {
+    let rot_deg: Vec<f64> = eval::ape_rotation_angle(truth, estimated)?
+        .into_iter()
+        .map(f64::to_degrees)
+        .collect();
+    let rot = eval::error_stats(&rot_deg)?;
+    let trans = eval::error_stats(&eval::ape_translation(truth, estimated)?)?;
+    Ok((rot.mean, rot.rmse, trans.mean, trans.rmse))
 }
 
+/// RMS of a set of errors; `None` when there are none.
 fn rms(errors: impl Iterator<Item = f64>) -> Option<f64> {
-    let (sum, n) = errors.fold((0.0, 0usize), |(s, n), e| (s + e * e, n + 1));
-    (n > 0).then(|| (sum / n as f64).sqrt())
+    eval::error_stats(&errors.collect::<Vec<_>>())
+        .ok()
+        .map(|s| s.rmse)
 }
 
 /// Slerp/linear interpolation of the known poses at time `t`, and the body angular velocity of
@@ -641,7 +644,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     // Reference: interpolation of the known poses.
     let started = Instant::now();
     let interp: Vec<Isometry3<f64>> = held_times.iter().map(|&t| interpolate(&seq, t).0).collect();
-    let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&interp, &held_truth);
+    let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&interp, &held_truth)?;
     let ang_vel = rms(seq
         .imu
         .iter()
@@ -701,7 +704,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 .collect();
             let estimated: Vec<Isometry3<f64>> = held_out.iter().map(|&i| all[i]).collect();
             let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) =
-                pose_errors(&estimated, &held_truth);
+                pose_errors(&estimated, &held_truth)?;
             let ang_vel_rmse_rad_s = if imu_times.is_empty() {
                 None
             } else {
