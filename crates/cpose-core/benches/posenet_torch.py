@@ -17,6 +17,7 @@ One training step = forward, loss, backward, Adam step (lr 1e-3 translation / 2e
 Usage:
   python posenet_ref.py --threads 2 [--batches 64,1024,4096,16384] [--modes plain,first,second]
   python posenet_ref.py --check        # finite-difference sanity check of the derivatives
+  python posenet_ref.py --matmul       # PyTorch's own f32 product rate, 4096x256 @ 256x256
 """
 import argparse
 import json
@@ -238,6 +239,21 @@ def check():
     assert e1 < 1e-6 and e2 < 1e-5
 
 
+def matmul_rate(threads):
+    """Best-of-20 GFLOP/s of one 4096x256 @ 256x256 f32 product (the shape of a hidden layer)."""
+    torch.set_num_threads(threads)
+    a, b = torch.rand(4096, WIDTH), torch.rand(WIDTH, WIDTH)
+    out = torch.empty(4096, WIDTH)
+    for _ in range(3):
+        torch.matmul(a, b, out=out)
+    best = math.inf
+    for _ in range(20):
+        t0 = time.perf_counter()
+        torch.matmul(a, b, out=out)
+        best = min(best, time.perf_counter() - t0)
+    return 2 * 4096 * WIDTH * WIDTH / best / 1e9
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--threads", type=int, default=2)
@@ -251,9 +267,14 @@ def main():
                     help="initial wait until the 1-min load average is below this (our own previous"
                          " run inflates it; the per-config foreign-CPU check is the real guard)")
     ap.add_argument("--check", action="store_true")
+    ap.add_argument("--matmul", action="store_true")
     a = ap.parse_args()
     if a.check:
         check()
+        return
+    if a.matmul:
+        for threads in (1, a.threads):
+            print(f"matmul 4096x256x256, {threads} thread(s): {matmul_rate(threads):.1f} GFLOP/s")
         return
     torch.set_num_threads(a.threads)
     log(f"torch {torch.__version__}, threads {torch.get_num_threads()}, "
