@@ -31,7 +31,7 @@ pub use geometry::{
 pub use pose_field::{
     Composed, DiscretePoses, DiscretePosesConfig, LieSplinePoses, Order, ParamKind,
     PerDimSplinePoses, PoseBatch, PoseField, PoseFieldError, PoseNet, PoseNetConfig,
-    SinusoidMotion, SplineConfig, SplineKind, SplinePoses,
+    SinusoidMotion, SplineConfig, SplineKind, SplinePoses, smooth_with_cubic_spline,
 };
 pub use real::Real;
 pub use registry::{FieldContext, PoseFieldSpec, Task, TaskInput};

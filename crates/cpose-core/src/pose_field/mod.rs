@@ -33,7 +33,10 @@ pub use composed::Composed;
 pub use discrete::{DiscretePoses, DiscretePosesConfig};
 pub use posenet::{PoseNet, PoseNetConfig};
 pub use sinusoid::SinusoidMotion;
-pub use spline::{LieSplinePoses, PerDimSplinePoses, SplineConfig, SplineKind, SplinePoses};
+pub use spline::{
+    LieSplinePoses, PerDimSplinePoses, SplineConfig, SplineKind, SplinePoses,
+    smooth_with_cubic_spline,
+};
 
 /// The highest time derivative an evaluation computes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]

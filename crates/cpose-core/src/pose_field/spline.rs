@@ -241,15 +241,7 @@ impl<S: Real> PerDimSplinePoses<S> {
                 y[(row, 3 + c)] = world_from_body[row].translation.vector[c];
             }
         }
-        let normal = a.transpose() * &a;
-        let rhs = a.transpose() * y;
-        let chol = normal.cholesky().ok_or_else(|| {
-            PoseFieldError::Invalid(format!(
-                "least-squares spline fit is singular: {m} samples for {k} control points \
-                 (every knot span needs samples)"
-            ))
-        })?;
-        let c = chol.solve(&rhs);
+        let c = solve_normal_equations(&a, &y)?;
         for kk in 0..k {
             let r = Vector3::new(c[(kk, 0)], c[(kk, 1)], c[(kk, 2)]);
             let p = Vector3::new(c[(kk, 3)], c[(kk, 4)], c[(kk, 5)]);
@@ -295,6 +287,60 @@ impl<S: Real> PerDimSplinePoses<S> {
         let first = |v: &[f64; SUPPORT + 1]| -> [f64; SUPPORT] { std::array::from_fn(|o| v[o]) };
         (j - DEGREE, [first(&n[3]), first(&d1), first(&d2)])
     }
+}
+
+/// Least-squares coefficients `c = argmin |A c − Y|²` by Cholesky on the normal equations.
+fn solve_normal_equations(
+    a: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+) -> Result<DMatrix<f64>, PoseFieldError> {
+    let (m, k) = a.shape();
+    let chol = (a.transpose() * a).cholesky().ok_or_else(|| {
+        PoseFieldError::Invalid(format!(
+            "least-squares spline fit is singular: {m} samples for {k} control points \
+             (every knot span needs samples)"
+        ))
+    })?;
+    Ok(chol.solve(&(a.transpose() * y)))
+}
+
+/// Replaces sampled values by their least-squares fit with the baseline's clamped cubic B-spline
+/// ([`PerDimSplinePoses`]'s knots, `num_control_points` over `range`), independently per channel:
+/// the projection behind the paper's "re-fit every 100 steps" for parameters that are not SE(3)
+/// poses (e.g. the 2-D warps of the planar study). `values` is sample-major, `channels` per sample.
+pub fn smooth_with_cubic_spline(
+    range: TimeRange,
+    num_control_points: usize,
+    times_secs: &[f64],
+    values: &mut [f64],
+    channels: usize,
+) -> Result<(), PoseFieldError> {
+    let m = times_secs.len();
+    if values.len() != m * channels {
+        return Err(PoseFieldError::Shape {
+            what: "spline samples",
+            expected: m * channels,
+            got: values.len(),
+        });
+    }
+    check_times(&range, times_secs)?;
+    let spline = PerDimSplinePoses::<f64>::new(range, num_control_points)?;
+    let mut a = DMatrix::<f64>::zeros(m, num_control_points);
+    let bases: Vec<_> = times_secs.iter().map(|&t| spline.basis(t)).collect();
+    for (row, (first, basis)) in bases.iter().enumerate() {
+        for o in 0..SUPPORT {
+            a[(row, first + o)] = basis[0][o];
+        }
+    }
+    let y = DMatrix::from_fn(m, channels, |r, c| values[r * channels + c]);
+    let coeffs = solve_normal_equations(&a, &y)?;
+    let fitted = a * coeffs;
+    for r in 0..m {
+        for c in 0..channels {
+            values[r * channels + c] = fitted[(r, c)];
+        }
+    }
+    Ok(())
 }
 
 /// The pose jet of the per-dimension spline from the 4 local control points `θ` and the basis.
@@ -904,6 +950,38 @@ mod tests {
             .evaluate(times, Order::Acceleration, &mut out)
             .unwrap();
         out
+    }
+
+    /// The smoothing projection reproduces any cubic exactly, interpolates when there are as
+    /// many samples as control points, and otherwise shrinks the residual of off-spline data.
+    #[test]
+    fn smoothing_projects_onto_the_spline_space() {
+        let r = range();
+        let times: Vec<f64> = (0..7).map(|i| 0.5 + 3.0 * i as f64 / 6.0).collect();
+        let cubic = |t: f64| [1.0 - 0.3 * t + 0.2 * t * t - 0.05 * t * t * t, 2.0 * t];
+        let mut v: Vec<f64> = times.iter().flat_map(|&t| cubic(t)).collect();
+        let want = v.clone();
+        smooth_with_cubic_spline(r, 5, &times, &mut v, 2).unwrap();
+        for (a, b) in v.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+        }
+        let zigzag: Vec<f64> = (0..7)
+            .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let mut exact = zigzag.clone();
+        smooth_with_cubic_spline(r, 7, &times, &mut exact, 1).unwrap();
+        for (a, b) in exact.iter().zip(&zigzag) {
+            assert!(
+                (a - b).abs() < 1e-9,
+                "7 control points interpolate 7 samples"
+            );
+        }
+        let mut smooth = zigzag.clone();
+        smooth_with_cubic_spline(r, 5, &times, &mut smooth, 1).unwrap();
+        let energy = |x: &[f64]| x.iter().map(|v| v * v).sum::<f64>();
+        assert!(energy(&smooth) < 0.8 * energy(&zigzag));
+        assert!(smooth_with_cubic_spline(r, 5, &times, &mut smooth, 2).is_err());
+        assert!(smooth_with_cubic_spline(r, 8, &times[..3], &mut smooth[..3], 1).is_err());
     }
 
     /// Asserts `q, q̇, q̈, p, ṗ, p̈` agree just before and just after each of `times`.
