@@ -171,20 +171,23 @@ fn every_config_runs_as_a_smoke_test() {
     configs.sort();
     assert!(configs.len() >= 2, "{configs:?}");
     let data = cpose_core::fs::shared_data_dir();
-    for config in configs {
+    'configs: for config in configs {
         let text = std::fs::read_to_string(&config).unwrap();
         let mut args: Vec<String> =
             vec!["run".into(), config.to_str().unwrap().into(), "-q".into()];
-        if text.contains("source = \"euroc\"") {
+        for (marker, key, relative) in [
+            ("source = \"euroc\"", "data.path", "euroc/V1_02_excerpt"),
+            ("planar/cat.jpg", "image.path", "planar/cat.jpg"),
+        ] {
+            if !text.contains(marker) {
+                continue;
+            }
             let Some(data) = &data else {
                 eprintln!("skipped {}: shared data folder not found", config.display());
-                continue;
+                continue 'configs;
             };
             args.push("--set".into());
-            args.push(format!(
-                "data.path={}",
-                data.join("euroc/V1_02_excerpt").display()
-            ));
+            args.push(format!("{key}={}", data.join(relative).display()));
         }
         let out_dir = temp_dir("smoke").join("run");
         args.extend([

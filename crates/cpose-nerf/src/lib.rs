@@ -5,3 +5,4 @@
 //! Built on [`cpose_core`]; the event and SLAM crates build on this one.
 
 pub use cpose_core;
+pub mod planar;

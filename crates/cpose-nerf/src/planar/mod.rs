@@ -1,0 +1,631 @@
+//! Task `planar`: the 2-D image-alignment study of the paper (§4.1.1, "Image alignment" table).
+//!
+//! A neural image is fitted to patches of one photograph, each patch seen through an unknown
+//! warp, and the warps are recovered jointly. The warps follow a smooth motion in time
+//! ([`motion`]); three pose models compete with everything else shared ([`model`]): PoseNet on
+//! time, BARF's free per-patch parameters, and BARF with a B-spline reset every 100 steps. Each
+//! runs on `trajectories` motions drawn from consecutive seeds; a run succeeds when its corner
+//! error is below 1 px of the original image.
+//!
+//! Coordinates are BARF's normalised image coordinates (the long side spans `[−1, 1]`), so the
+//! study may run on a downscaled copy of the image (`[image] scale`) while corner errors are
+//! reported in pixels of the original.
+
+pub mod model;
+pub mod motion;
+pub mod train;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+use anyhow::Context;
+use cpose_core::registry::{Task, TaskInput};
+use cpose_core::{PoseNetConfig, Section};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::field2d::{GridConfig, ImageField, PeMlpConfig};
+use crate::image::{Image, procedural_texture};
+use crate::warp2d::{Warp, WarpKind};
+use model::{FieldModel, FreeModel, PoseModel, PoseRates, SplineReset};
+use motion::{Motion, MotionSpec};
+use train::{Layout, RunResult, Schedule, Trainer};
+
+inventory::submit! {
+    Task {
+        name: "planar",
+        about: "2-D image alignment (paper §4.1.1): PoseNet vs BARF vs B-spline on patches of one image",
+        run,
+    }
+}
+
+/// The config file of the task.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Experiment {
+    #[serde(default)]
+    image: ImageConfig,
+    #[serde(default)]
+    motion: MotionConfig,
+    #[serde(default)]
+    train: TrainConfig,
+    /// The neural image, `kind = "grid"` or `"mlp"`, decoded by kind.
+    field: Option<serde::de::IgnoredAny>,
+    /// PoseNet's settings ([`PoseNetConfig`]).
+    posenet: Option<serde::de::IgnoredAny>,
+}
+
+/// `[image]`: the photograph.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct ImageConfig {
+    /// A PNG or JPEG; none for the built-in procedural texture.
+    path: Option<PathBuf>,
+    /// Size of the procedural texture, pixels `[width, height]`.
+    procedural_size: [usize; 2],
+    /// Working resolution relative to the image (errors stay in original pixels).
+    scale: f64,
+    /// Side of the square centre crop every patch shows, pixels of the original image.
+    crop_px: f64,
+}
+
+impl Default for ImageConfig {
+    fn default() -> Self {
+        Self {
+            path: None,
+            procedural_size: [480, 360],
+            scale: 0.5,
+            crop_px: 180.0,
+        }
+    }
+}
+
+/// `[motion]`: the ground-truth motions.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct MotionConfig {
+    /// `"se2"` (the paper) or `"homography"` (BARF's protocol).
+    warp: WarpKind,
+    /// Patches per motion.
+    patches: usize,
+    /// Random SE(2) poses the ground-truth spline passes through.
+    control_points: usize,
+    /// σ of their rotation, degrees.
+    rotation_deg: f64,
+    /// σ of their translation (homography: the diagonal offset), normalised units.
+    translation: f64,
+    /// Homography: σ of every sl(3) parameter.
+    homography_noise: f64,
+    /// Motions (trajectories) per method; motion `k` is drawn from seed `run.seed · 1000 + k`.
+    trajectories: usize,
+    /// Motions whose renders are saved (the first ones).
+    render_trajectories: usize,
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        Self {
+            warp: WarpKind::Se2,
+            patches: 7,
+            control_points: 10,
+            rotation_deg: 8.0,
+            translation: 0.15,
+            homography_noise: 0.1,
+            trajectories: 20,
+            render_trajectories: 1,
+        }
+    }
+}
+
+/// `[train]`: optimisation, shared by every method.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct TrainConfig {
+    /// Methods to run: `posenet`, `barf`, `spline`.
+    methods: Vec<Method>,
+    /// Steps per run.
+    iterations: usize,
+    /// Pixels per step over all patches.
+    pixels_per_step: usize,
+    /// Learning rate of the neural image.
+    lr_field: f64,
+    /// Learning rate of translations (PoseNet's translation network).
+    lr_translation: f64,
+    /// Learning rate of rotations (PoseNet's rotation network).
+    lr_rotation: f64,
+    /// Learning rate of homography parameters.
+    lr_homography: f64,
+    /// B-spline baseline: control points.
+    spline_control_points: usize,
+    /// B-spline baseline: steps between resets.
+    spline_reset_every: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            methods: vec![Method::Posenet, Method::Barf, Method::Spline],
+            iterations: 2000,
+            pixels_per_step: 4096,
+            lr_field: 1e-3,
+            lr_translation: 1e-3,
+            lr_rotation: 2e-4,
+            lr_homography: 1e-3,
+            spline_control_points: 5,
+            spline_reset_every: 100,
+        }
+    }
+}
+
+/// A pose model, named as in `metrics.json`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
+#[serde(rename_all = "lowercase")]
+enum Method {
+    /// PoseNet on time.
+    Posenet,
+    /// Free per-patch parameters.
+    Barf,
+    /// Free parameters reset to a B-spline.
+    Spline,
+}
+
+impl Method {
+    fn key(self) -> &'static str {
+        match self {
+            Self::Posenet => "posenet",
+            Self::Barf => "barf",
+            Self::Spline => "spline",
+        }
+    }
+}
+
+/// The neural image chosen by `[field] kind`.
+#[derive(Clone, Debug)]
+enum FieldChoice {
+    Grid(GridConfig),
+    Mlp(PeMlpConfig),
+}
+
+impl FieldChoice {
+    fn from_section(section: &Section<'_>) -> anyhow::Result<Self> {
+        if !section.exists()? {
+            return Ok(Self::Grid(GridConfig::default()));
+        }
+        let (kind, at) = section.kind()?;
+        Ok(match kind.as_str() {
+            "grid" => Self::Grid(section.decode_params()?),
+            "mlp" => Self::Mlp(section.decode_params()?),
+            other => {
+                return Err(section
+                    .config()
+                    .error_at(
+                        Some(at),
+                        format!("unknown neural image kind {other:?}; known kinds: grid, mlp"),
+                    )
+                    .into());
+            }
+        })
+    }
+
+    fn init(&self, seed: u64) -> anyhow::Result<Box<dyn ImageField>> {
+        Ok(match self {
+            Self::Grid(c) => {
+                let mut c = c.clone();
+                c.seed = c.seed.wrapping_add(seed);
+                Box::new(c.init::<f32>()?)
+            }
+            Self::Mlp(c) => {
+                let mut c = c.clone();
+                c.seed = c.seed.wrapping_add(seed);
+                Box::new(c.init::<f32>()?)
+            }
+        })
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            Self::Grid(_) => "grid",
+            Self::Mlp(_) => "mlp",
+        }
+    }
+}
+
+/// Everything a run needs, validated.
+struct Study {
+    image: Image,
+    name: String,
+    original_size: [usize; 2],
+    layout: Layout,
+    spec: MotionSpec,
+    field: FieldChoice,
+    posenet: PoseNetConfig,
+    schedule: Schedule,
+    rates: PoseRates,
+    reset: SplineReset,
+    methods: Vec<Method>,
+    trajectories: usize,
+    render_trajectories: usize,
+}
+
+impl Study {
+    fn new(input: &TaskInput, exp: &Experiment) -> anyhow::Result<Self> {
+        let config = input.config;
+        let bad = |what: String| anyhow::anyhow!("{}: {what}", config.path().display());
+        let (original, name) = match &exp.image.path {
+            Some(path) => (
+                Image::load(path)?,
+                path.file_stem()
+                    .map_or("image".into(), |s| s.to_string_lossy().into_owned()),
+            ),
+            None => {
+                let [w, h] = exp.image.procedural_size;
+                if w < 8 || h < 8 {
+                    return Err(bad(format!(
+                        "[image] procedural_size {w}×{h} is too small (at least 8×8)"
+                    )));
+                }
+                (procedural_texture(w, h, input.run.seed), "procedural".into())
+            }
+        };
+        let scale = exp.image.scale;
+        if !(scale > 0.0 && scale <= 1.0) {
+            return Err(bad(format!("[image] scale must be in (0, 1], got {scale}")));
+        }
+        let (w0, h0) = (original.width(), original.height());
+        let crop = exp.image.crop_px;
+        let side = (crop * scale).round() as usize;
+        if !(crop > 0.0) || crop > w0.min(h0) as f64 || side < 4 {
+            return Err(bad(format!(
+                "[image] crop_px = {crop} does not fit the {w0}×{h0} image at scale {scale} \
+                 (the crop must lie inside the image and span at least 4 working pixels)"
+            )));
+        }
+        let image = if scale < 1.0 {
+            original.resized(scale)
+        } else {
+            original
+        };
+        let layout = Layout::centre_crop(exp.motion.warp, [w0, h0], crop, side);
+        let m = &exp.motion;
+        if m.patches < 2 {
+            return Err(bad(format!("[motion] patches must be at least 2, got {}", m.patches)));
+        }
+        if m.control_points < 4 {
+            return Err(bad(format!(
+                "[motion] control_points must be at least 4 (a cubic spline), got {}",
+                m.control_points
+            )));
+        }
+        if m.trajectories == 0 {
+            return Err(bad("[motion] trajectories must be at least 1".into()));
+        }
+        for (key, v) in [
+            ("rotation_deg", m.rotation_deg),
+            ("translation", m.translation),
+            ("homography_noise", m.homography_noise),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(format!("[motion] {key} must be finite and ≥ 0, got {v}")));
+            }
+        }
+        let t = &exp.train;
+        for (key, v) in [
+            ("lr_field", t.lr_field),
+            ("lr_translation", t.lr_translation),
+            ("lr_rotation", t.lr_rotation),
+            ("lr_homography", t.lr_homography),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(format!("[train] {key} must be finite and ≥ 0, got {v}")));
+            }
+        }
+        if t.pixels_per_step == 0 || t.methods.is_empty() {
+            return Err(bad(
+                "[train] pixels_per_step must be ≥ 1 and methods must name at least one method"
+                    .into(),
+            ));
+        }
+        if m.warp == WarpKind::Homography && t.methods.contains(&Method::Posenet) {
+            return Err(bad(
+                "[train] methods: posenet models rigid motions (warp = \"se2\"); with \
+                 warp = \"homography\" use methods = [\"barf\", \"spline\"]"
+                    .into(),
+            ));
+        }
+        let posenet_section = config.section("posenet");
+        let posenet: PoseNetConfig = if posenet_section.exists()? {
+            posenet_section.decode()?
+        } else {
+            PoseNetConfig::default()
+        };
+        let spec = MotionSpec {
+            warp: m.warp,
+            patches: m.patches,
+            control_points: m.control_points,
+            rotation_std_rad: m.rotation_deg.to_radians(),
+            translation_std: m.translation,
+            homography_std: m.homography_noise,
+        };
+        let reset = SplineReset {
+            control_points: t.spline_control_points,
+            every: t.spline_reset_every,
+        };
+        if t.methods.contains(&Method::Spline) {
+            FreeModel::new(m.warp, spec.patch_times(), spec.time_range(), PoseRates::ZERO, Some(reset))
+                .check()
+                .map_err(|e| bad(format!("[train] {e}")))?;
+        }
+        let mut methods = t.methods.clone();
+        methods.sort();
+        methods.dedup();
+        Ok(Self {
+            image,
+            name,
+            original_size: [w0, h0],
+            layout,
+            spec,
+            field: FieldChoice::from_section(&config.section("field"))?,
+            posenet,
+            schedule: Schedule {
+                iterations: input.run.iterations(t.iterations),
+                pixels_per_step: t.pixels_per_step,
+                lr_field: t.lr_field,
+            },
+            rates: PoseRates {
+                translation: t.lr_translation,
+                rotation: t.lr_rotation,
+                homography: t.lr_homography,
+            },
+            reset,
+            methods,
+            trajectories: m.trajectories,
+            render_trajectories: m.render_trajectories,
+        })
+    }
+
+    fn motion(&self, seed: u64, k: usize) -> anyhow::Result<Motion> {
+        let [w, h] = [self.image.width() as f64, self.image.height() as f64];
+        let long = w.max(h);
+        self.spec
+            .sample(seed * 1000 + k as u64, &self.layout.corners, [w / long, h / long])
+            .map_err(|e| anyhow::anyhow!("motion {k}: {e}"))
+    }
+
+    fn model(&self, method: Method, seed: u64) -> anyhow::Result<PoseModel> {
+        let times = self.spec.patch_times();
+        let range = self.spec.time_range();
+        Ok(match method {
+            Method::Posenet => {
+                let mut c = self.posenet.clone();
+                c.seed = c.seed.wrapping_add(seed);
+                PoseModel::Field(FieldModel::new(Box::new(c.init::<f32>(range)?), times, self.rates))
+            }
+            Method::Barf => {
+                PoseModel::Free(FreeModel::new(self.spec.warp, times, range, self.rates, None))
+            }
+            Method::Spline => PoseModel::Free(FreeModel::new(
+                self.spec.warp,
+                times,
+                range,
+                self.rates,
+                Some(self.reset),
+            )),
+        })
+    }
+}
+
+/// Aggregates over the trajectories of one method.
+#[derive(Debug, Serialize)]
+struct MethodSummary {
+    corner_err_px: f64,
+    corner_err_px_median: f64,
+    psnr_db: f64,
+    success_rate: f64,
+    wall_s: f64,
+    runs: Vec<RunResult>,
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let exp: Experiment = input.config.parse_params()?;
+    let study = Study::new(input, &exp)?;
+    let seed = input.run.seed;
+    let motions = (0..study.trajectories)
+        .map(|k| study.motion(seed, k))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    input.run_dir.log(format_args!(
+        "{}: {}×{} image, working {}×{}; {} patches of {}×{} working pixels, warp {:?}; \
+         neural image {}; {} trajectories × {:?}; {} steps of {} pixels",
+        study.name,
+        study.original_size[0],
+        study.original_size[1],
+        study.image.width(),
+        study.image.height(),
+        study.spec.patches,
+        (study.layout.grid.len() as f64).sqrt(),
+        (study.layout.grid.len() as f64).sqrt(),
+        study.spec.warp,
+        study.field.name(),
+        study.trajectories,
+        study.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
+        study.schedule.iterations,
+        study.schedule.pixels_per_step,
+    ));
+    let jobs: Vec<(usize, Method)> = (0..study.trajectories)
+        .flat_map(|k| study.methods.iter().map(move |&m| (k, m)))
+        .collect();
+    let progress = input.progress(
+        (jobs.len() * study.schedule.iterations) as u64,
+        "aligning",
+    );
+    let renders = Mutex::new(Vec::new());
+    let started = std::time::Instant::now();
+    let results: Vec<((usize, Method), RunResult)> = jobs
+        .par_iter()
+        .map(|&(k, method)| -> anyhow::Result<_> {
+            let motion = &motions[k];
+            let patches = train::sample_patches(&study.image, &study.layout, &motion.params);
+            // The same neural-image initialisation and pixel draws for every method.
+            let job_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
+            let mut field = study.field.init(job_seed)?;
+            let mut model = study.model(method, job_seed)?;
+            let (outcome, wall_s) = train::timed(|| {
+                Trainer::new(
+                    field.as_mut(),
+                    &mut model,
+                    &study.layout,
+                    &patches,
+                    study.schedule,
+                    job_seed,
+                )
+                .run(&|| progress.inc(1))
+            });
+            let (final_loss, warps) = outcome
+                .with_context(|| format!("trajectory {k}, method {}", method.key()))?;
+            let rendered = train::render(field.as_mut(), study.image.width(), study.image.height());
+            let result = RunResult {
+                corner_err_px: train::corner_error_px(&study.layout, &warps, &motion.params),
+                psnr_db: train::region_psnr(&rendered, &study.image, &study.layout, &motion.params),
+                final_loss,
+                wall_s,
+                warps,
+            };
+            if k < study.render_trajectories
+                && let Ok(mut r) = renders.lock()
+            {
+                r.push((k, method, rendered, result.warps.clone()));
+            }
+            Ok(((k, method), result))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    progress.finish();
+    let wall = started.elapsed().as_secs_f64();
+
+    let mut by_method: BTreeMap<Method, Vec<RunResult>> = BTreeMap::new();
+    for ((_, m), r) in results {
+        by_method.entry(m).or_default().push(r);
+    }
+    let mut summary: BTreeMap<&str, MethodSummary> = BTreeMap::new();
+    for (m, runs) in by_method {
+        let n = runs.len() as f64;
+        let mut errs: Vec<f64> = runs.iter().map(|r| r.corner_err_px).collect();
+        errs.sort_by(f64::total_cmp);
+        summary.insert(
+            m.key(),
+            MethodSummary {
+                corner_err_px: errs.iter().sum::<f64>() / n,
+                corner_err_px_median: median(&errs),
+                psnr_db: runs.iter().map(|r| r.psnr_db).sum::<f64>() / n,
+                success_rate: errs.iter().filter(|&&e| e < 1.0).count() as f64 / n,
+                wall_s: runs.iter().map(|r| r.wall_s).sum(),
+                runs,
+            },
+        );
+    }
+    let mut renders = renders.into_inner().unwrap_or_default();
+    renders.sort_by_key(|(k, m, ..)| (*k, *m));
+    for (k, method, rendered, warps) in renders {
+        let truth = &motions[k].params;
+        let overlay = render::overlay(&study.image, &study.layout, truth, &warps);
+        let pair = render::side_by_side(&overlay, &rendered);
+        pair.save_png(input.run_dir.file(format!("{}_t{k:02}.png", method.key())))?;
+    }
+    for k in 0..study.render_trajectories.min(study.trajectories) {
+        let patches = train::sample_patches(&study.image, &study.layout, &motions[k].params);
+        render::patch_strip(&patches, &study.layout)
+            .save_png(input.run_dir.file(format!("patches_t{k:02}.png")))?;
+    }
+    let metrics = BTreeMap::from([(study.name.clone(), summary)]);
+    input.run_dir.write_json("metrics.json", &metrics)?;
+    input.run_dir.log(table(&metrics, wall));
+    Ok(())
+}
+
+fn median(sorted: &[f64]) -> f64 {
+    let n = sorted.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+    }
+}
+
+/// The paper's table: corner error, PSNR and success rate per method.
+fn table(metrics: &BTreeMap<String, BTreeMap<&str, MethodSummary>>, wall_s: f64) -> String {
+    let mut s = format!(
+        "\n{:<12} {:<9} {:>10} {:>10} {:>9} {:>8} {:>9}\n",
+        "image", "method", "CE [px]", "CE median", "PSNR", "SR", "cpu [s]"
+    );
+    for (image, methods) in metrics {
+        for (name, m) in methods {
+            s.push_str(&format!(
+                "{image:<12} {name:<9} {:>10.3} {:>10.3} {:>9.2} {:>7.0}% {:>9.1}\n",
+                m.corner_err_px,
+                m.corner_err_px_median,
+                m.psnr_db,
+                100.0 * m.success_rate,
+                m.wall_s
+            ));
+        }
+    }
+    s.push_str(&format!("study wall time {wall_s:.1} s\n"));
+    s
+}
+
+pub mod render {
+    //! PNG renders of the study: true and estimated patch outlines, the neural image, patches.
+
+    use super::train::Layout;
+    use crate::image::Image;
+    use crate::warp2d::Warp;
+
+    const TRUE: [f32; 3] = [0.1, 0.9, 0.2];
+    const ESTIMATED: [f32; 3] = [0.95, 0.15, 0.1];
+
+    /// The image with every patch's true (green) and estimated (red) outline and corners.
+    pub fn overlay(image: &Image, layout: &Layout, truth: &[Vec<f64>], estimated: &[Vec<f64>]) -> Image {
+        let mut out = image.clone();
+        let (w, h) = (image.width() as f64, image.height() as f64);
+        let long = w.max(h);
+        let to_px = |p: [f64; 2]| [(p[0] * long + w) / 2.0, (p[1] * long + h) / 2.0];
+        for (params, colour) in [(truth, TRUE), (estimated, ESTIMATED)] {
+            for p in params {
+                let warp = Warp::new(layout.warp, p);
+                let quad: Vec<[f64; 2]> = layout.corners.iter().map(|&c| to_px(warp.apply(c))).collect();
+                out.draw_polygon(&quad, colour, 1.0);
+                for &c in &quad {
+                    out.draw_marker(c, colour, 2.0);
+                }
+            }
+        }
+        out
+    }
+
+    /// `a` and `b` next to each other (heights padded with black).
+    pub fn side_by_side(a: &Image, b: &Image) -> Image {
+        let h = a.height().max(b.height());
+        Image::from_fn(a.width() + b.width(), h, |x, y| {
+            if x < a.width() {
+                if y < a.height() { a.pixel(x, y) } else { [0.0; 3] }
+            } else if y < b.height() {
+                b.pixel(x - a.width(), y)
+            } else {
+                [0.0; 3]
+            }
+        })
+    }
+
+    /// The ground-truth patches in a row, in time order, 2 pixels apart.
+    pub fn patch_strip(patches: &[Vec<[f32; 3]>], layout: &Layout) -> Image {
+        let side = (layout.grid.len() as f64).sqrt().round() as usize;
+        let gap = 2;
+        let n = patches.len();
+        Image::from_fn(n * side + (n - 1) * gap, side, |x, y| {
+            let (i, u) = (x / (side + gap), x % (side + gap));
+            if u >= side { [1.0; 3] } else { patches[i][y * side + u] }
+        })
+    }
+}
