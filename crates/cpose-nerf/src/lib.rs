@@ -4,4 +4,6 @@
 //!
 //! Built on [`cpose_core`]; the event and SLAM crates build on this one.
 
+pub mod field2d;
+
 pub use cpose_core;
