@@ -5,4 +5,6 @@
 //! Built on [`cpose_core`]; the event and SLAM crates build on this one.
 
 pub use cpose_core;
+
+pub mod field2d;
 pub mod planar;
