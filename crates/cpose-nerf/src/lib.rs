@@ -5,3 +5,6 @@
 //! Built on [`cpose_core`]; the event and SLAM crates build on this one.
 
 pub use cpose_core;
+
+pub mod image;
+pub mod warp2d;
