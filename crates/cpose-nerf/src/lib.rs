@@ -7,4 +7,6 @@
 pub use cpose_core;
 
 pub mod field2d;
+pub mod image;
 pub mod planar;
+pub mod warp2d;

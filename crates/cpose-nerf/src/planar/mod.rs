@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::field2d::{GridConfig, ImageField, PeMlpConfig};
 use crate::image::{Image, procedural_texture};
-use crate::warp2d::{Warp, WarpKind};
+use crate::warp2d::WarpKind;
 use model::{FieldModel, FreeModel, PoseModel, PoseRates, SplineReset};
 use motion::{Motion, MotionSpec};
 use train::{Layout, RunResult, Schedule, Trainer};
@@ -50,10 +50,12 @@ struct Experiment {
     motion: MotionConfig,
     #[serde(default)]
     train: TrainConfig,
-    /// The neural image, `kind = "grid"` or `"mlp"`, decoded by kind.
-    field: Option<serde::de::IgnoredAny>,
-    /// PoseNet's settings ([`PoseNetConfig`]).
-    posenet: Option<serde::de::IgnoredAny>,
+    /// The neural image, `kind = "grid"` or `"mlp"`, decoded by kind ([`FieldChoice`]).
+    #[serde(rename = "field")]
+    _field: Option<serde::de::IgnoredAny>,
+    /// PoseNet's settings, decoded as a [`PoseNetConfig`].
+    #[serde(rename = "posenet")]
+    _posenet: Option<serde::de::IgnoredAny>,
 }
 
 /// `[image]`: the photograph.

@@ -98,8 +98,6 @@ impl MotionSpec {
     }
 
     fn draw_rigid(&self, rng: &mut ChaCha8Rng, times: &[f64]) -> Result<Vec<Vec<f64>>, String> {
-        let normal = |std: f64| Normal::new(0.0, std).map_err(|e| e.to_string());
-        let (rot, trans) = (normal(self.rotation_std_rad)?, normal(self.translation_std)?);
         let k = self.control_points;
         let knot_times: Vec<f64> = (0..k).map(|i| i as f64).collect();
         let poses: Vec<Isometry3<f64>> = (0..k)

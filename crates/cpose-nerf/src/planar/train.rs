@@ -286,7 +286,7 @@ fn footprint(width: usize, height: usize, layout: &Layout, truth: &[Vec<f64>]) -
     let half = layout.corners[2][0].abs();
     let inverses: Vec<_> = truth
         .iter()
-        .filter_map(|p| Warp::new(layout.warp, p).h.try_inverse())
+        .filter_map(|p| Warp::new(layout.warp, p).matrix().try_inverse())
         .collect();
     let mut mask = vec![false; width * height];
     for y in 0..height {
