@@ -223,3 +223,46 @@ fn every_config_runs_as_a_smoke_test() {
         );
     }
 }
+
+/// The planar study's bad input — an unreadable or corrupt image, an image smaller than the
+/// patch layout, zero patches, a negative learning rate — each ends the run with one line naming
+/// the problem and a non-zero exit, before any training.
+#[test]
+fn planar_rejects_bad_input_with_one_clear_line() {
+    let dir = temp_dir("planar-bad");
+    write(&dir, "corrupt.png", "not a png");
+    let tiny = dir.join("tiny.png");
+    cpose_nerf_image(&tiny, 64, 48);
+    let config = workspace_root().join("configs/planar.toml");
+    let cases: [(&str, &[&str], &str); 5] = [
+        ("missing image", &["image.path=missing.jpg"], "missing.jpg"),
+        ("corrupt image", &["image.path=corrupt.png"], "corrupt.png"),
+        ("small image", &["image.path=tiny.png"], "crop_px"),
+        ("zero patches", &["motion.patches=0"], "patches"),
+        ("negative rate", &["train.lr_field=-1e-3"], "lr_field"),
+    ];
+    for (name, sets, expected) in cases {
+        let mut args = vec!["run", config.to_str().unwrap(), "-q", "--out"];
+        let out_dir = dir.join(name.replace(' ', "_"));
+        args.push(out_dir.to_str().unwrap());
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        let out = cpose_in(&dir, &args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name}: succeeded");
+        assert!(err.contains(expected), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        assert!(
+            !out_dir.join("metrics.json").exists(),
+            "{name}: wrote metrics"
+        );
+    }
+}
+
+/// Writes a small valid PNG of `width × height` through the library.
+fn cpose_nerf_image(path: &Path, width: usize, height: usize) {
+    cpose_nerf::image::procedural_texture(width, height, 0)
+        .save_png(path)
+        .unwrap();
+}

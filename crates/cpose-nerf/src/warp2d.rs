@@ -197,7 +197,9 @@ pub fn matrix(kind: WarpKind, p: &[f64]) -> Matrix3<f64> {
 pub struct Warp {
     kind: WarpKind,
     h: Matrix3<f64>,
-    d_h_d_p: Vec<Matrix3<f64>>,
+    /// `∂H/∂p_k` for `k < kind.dim()`; the rest zero (a fixed array: building a rigid warp
+    /// does not allocate).
+    d_h_d_p: [Matrix3<f64>; MAX_WARP_DIM],
 }
 
 impl Warp {
@@ -230,15 +232,19 @@ impl Warp {
                 d_tx[(0, 2)] = 1.0;
                 let mut d_ty = Matrix3::zeros();
                 d_ty[(1, 2)] = 1.0;
+                let mut d_h_d_p = [Matrix3::zeros(); MAX_WARP_DIM];
+                d_h_d_p[..3].copy_from_slice(&[d_theta, d_tx, d_ty]);
                 Warp {
                     kind,
                     h: matrix(kind, p),
-                    d_h_d_p: vec![d_theta, d_tx, d_ty],
+                    d_h_d_p,
                 }
             }
             WarpKind::Homography => {
                 let basis: Vec<Matrix3<f64>> = (0..8).map(sl3_basis).collect();
-                let (h, d_h_d_p) = expm_with_frechet(&sl3_generator(p), &basis);
+                let (h, d) = expm_with_frechet(&sl3_generator(p), &basis);
+                let mut d_h_d_p = [Matrix3::zeros(); MAX_WARP_DIM];
+                d_h_d_p.copy_from_slice(&d);
                 Warp { kind, h, d_h_d_p }
             }
         }
@@ -256,7 +262,7 @@ impl Warp {
 
     /// `∂H/∂p_k` for `k < kind.dim()` (length `kind.dim()`).
     pub fn d_matrix_d_param(&self) -> &[Matrix3<f64>] {
-        &self.d_h_d_p
+        &self.d_h_d_p[..self.kind.dim()]
     }
 
     /// The warped point (normalised coordinates in and out), with `v = H·[x, y, 1]`:
@@ -284,7 +290,7 @@ impl Warp {
         let mut jac = [[0.0; 2]; MAX_WARP_DIM];
         match self.kind {
             WarpKind::Se2 => {
-                for (j, d_h) in jac.iter_mut().zip(&self.d_h_d_p) {
+                for (j, d_h) in jac.iter_mut().zip(self.d_matrix_d_param()) {
                     let dv = d_h * xh;
                     *j = [dv.x, dv.y];
                 }
@@ -293,7 +299,7 @@ impl Warp {
             WarpKind::Homography => {
                 let w = v.z + HOMOGRAPHY_DEPTH_EPS;
                 let out = [v.x / w, v.y / w];
-                for (j, d_h) in jac.iter_mut().zip(&self.d_h_d_p) {
+                for (j, d_h) in jac.iter_mut().zip(self.d_matrix_d_param()) {
                     let dv = d_h * xh;
                     *j = [(dv.x - out[0] * dv.z) / w, (dv.y - out[1] * dv.z) / w];
                 }

@@ -161,6 +161,11 @@ impl<S: Real> PoseField<S> for Composed<S> {
         self.b.params_mut(visit);
     }
 
+    fn set_progress(&mut self, progress: f64) {
+        self.a.set_progress(progress);
+        self.b.set_progress(progress);
+    }
+
     fn evaluate(
         &self,
         times_secs: &[f64],

@@ -281,6 +281,12 @@ pub trait PoseField<S: Real = f32>: Send + Sync {
     /// Visits the parameter slices mutably, in the same order as [`PoseField::params`].
     fn params_mut(&mut self, visit: &mut dyn FnMut(ParamKind, &mut [S]));
 
+    /// Advances coarse-to-fine schedules (e.g. PoseNet's `c2f`) to `progress`, the fraction of
+    /// training done (0–1). Fields without one ignore it.
+    fn set_progress(&mut self, progress: f64) {
+        let _ = progress;
+    }
+
     /// Evaluates at `times_secs` up to `order` into `out` (resized). An out-of-range time is an
     /// error. Caches nothing.
     fn evaluate(

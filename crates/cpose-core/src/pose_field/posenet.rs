@@ -45,6 +45,10 @@ pub struct PoseNetConfig {
     /// Bound `s` of the translation head `p = s · tanh(o)`, in the trajectory's length unit
     /// (metres or scene units); default 1 (the authors' `(−1, 1)`).
     pub translation_scale: f64,
+    /// Coarse-to-fine window `[start, end]` over the time bands (BARF's schedule applied to
+    /// time, driven by [`PoseField::set_progress`]); `end ≤ start` (default `[0, 0]`) keeps every
+    /// band on, as the paper.
+    pub c2f: [f64; 2],
     /// Seed of the weight initialisation (ChaCha8); default 0.
     pub seed: u64,
 }
@@ -60,6 +64,7 @@ impl Default for PoseNetConfig {
             encoding: Encoding::Sinusoidal,
             coupled: false,
             translation_scale: 1.0,
+            c2f: [0.0, 0.0],
             seed: 0,
         }
     }
@@ -92,7 +97,14 @@ impl PoseNetConfig {
                 self.translation_scale
             ));
         }
-        let embedding = Embedding::new(self.encoding, 1, self.bands);
+        let [c2f_start, c2f_end] = self.c2f;
+        if !(0.0..=1.0).contains(&c2f_start) || !(0.0..=1.0).contains(&c2f_end) {
+            return invalid(format!(
+                "c2f = [{c2f_start}, {c2f_end}] must lie in [0, 1] (fractions of training)"
+            ));
+        }
+        let mut embedding = Embedding::new(self.encoding, 1, self.bands);
+        embedding.set_coarse_to_fine(0.0, c2f_start, c2f_end);
         let spec = |output_dim| MlpSpec {
             input_dim: embedding.output_dim(),
             width: self.width,
@@ -436,6 +448,11 @@ impl<S: Real> PoseNet<S> {
 impl<S: Real> PoseField<S> for PoseNet<S> {
     fn time_range(&self) -> TimeRange {
         self.range
+    }
+
+    fn set_progress(&mut self, progress: f64) {
+        let [start, end] = self.config.c2f;
+        self.embedding.set_coarse_to_fine(progress, start, end);
     }
 
     fn num_params(&self) -> usize {

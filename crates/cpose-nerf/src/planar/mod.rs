@@ -7,6 +7,18 @@
 //! runs on `trajectories` motions drawn from consecutive seeds; a run succeeds when its corner
 //! error is below 1 px of the original image.
 //!
+//! Protocol, where the paper is silent (defaults of `configs/planar*.toml`):
+//! - 10 random SE(2) poses (σ 3° and 0.08 normalised units ≈ 19 px) at times 0…9, a cubic spline
+//!   through them per dimension, and **7 patches** at uniformly spaced times over 0…9 ("we
+//!   interpolate on 7 uniformly spaced points"); warps relative to the first patch, which is the
+//!   180×180 centre crop. All estimates start at the identity (the centre crop).
+//! - BARF and the spline baseline use the paper's rates (1e-3 translation, 2e-4 rotation).
+//!   PoseNet (8×256, F = 5) uses them divided by 10: at 1e-3, Adam moves every weight of the
+//!   deep network at once and the tanh heads saturate within a few hundred steps.
+//! - The neural image is a multi-resolution grid with a tiny MLP (coarse-to-fine over levels
+//!   during the first 40% of training), trained on 4096 random patch pixels per step for 2000
+//!   steps at half resolution; BARF's positional-encoding MLP is `[field] kind = "mlp"`.
+//!
 //! Coordinates are BARF's normalised image coordinates (the long side spans `[−1, 1]`), so the
 //! study may run on a downscaled copy of the image (`[image] scale`) while corner errors are
 //! reported in pixels of the original.
@@ -27,7 +39,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::field2d::{GridConfig, ImageField, PeMlpConfig};
 use crate::image::{Image, procedural_texture};
-use crate::warp2d::WarpKind;
+use crate::warp2d::{Warp, WarpKind};
 use model::{FieldModel, FreeModel, PoseModel, PoseRates, SplineReset};
 use motion::{Motion, MotionSpec};
 use train::{Layout, RunResult, Schedule, Trainer};
@@ -111,8 +123,8 @@ impl Default for MotionConfig {
             warp: WarpKind::Se2,
             patches: 7,
             control_points: 10,
-            rotation_deg: 8.0,
-            translation: 0.15,
+            rotation_deg: 3.0,
+            translation: 0.08,
             homography_noise: 0.1,
             trajectories: 20,
             render_trajectories: 1,
@@ -132,10 +144,14 @@ struct TrainConfig {
     pixels_per_step: usize,
     /// Learning rate of the neural image.
     lr_field: f64,
-    /// Learning rate of translations (PoseNet's translation network).
+    /// Learning rate of the free translations (BARF, spline; the paper's 1e-3).
     lr_translation: f64,
-    /// Learning rate of rotations (PoseNet's rotation network).
+    /// Learning rate of the free rotations (BARF, spline; the paper's 2e-4).
     lr_rotation: f64,
+    /// Learning rate of PoseNet's translation network.
+    posenet_lr_translation: f64,
+    /// Learning rate of PoseNet's rotation network.
+    posenet_lr_rotation: f64,
     /// Learning rate of homography parameters.
     lr_homography: f64,
     /// B-spline baseline: control points.
@@ -153,6 +169,8 @@ impl Default for TrainConfig {
             lr_field: 1e-3,
             lr_translation: 1e-3,
             lr_rotation: 2e-4,
+            posenet_lr_translation: 1e-4,
+            posenet_lr_rotation: 2e-5,
             lr_homography: 1e-3,
             spline_control_points: 5,
             spline_reset_every: 100,
@@ -244,6 +262,7 @@ struct Study {
     posenet: PoseNetConfig,
     schedule: Schedule,
     rates: PoseRates,
+    posenet_rates: PoseRates,
     reset: SplineReset,
     methods: Vec<Method>,
     trajectories: usize,
@@ -267,7 +286,10 @@ impl Study {
                         "[image] procedural_size {w}×{h} is too small (at least 8×8)"
                     )));
                 }
-                (procedural_texture(w, h, input.run.seed), "procedural".into())
+                (
+                    procedural_texture(w, h, input.run.seed),
+                    "procedural".into(),
+                )
             }
         };
         let scale = exp.image.scale;
@@ -277,7 +299,7 @@ impl Study {
         let (w0, h0) = (original.width(), original.height());
         let crop = exp.image.crop_px;
         let side = (crop * scale).round() as usize;
-        if !(crop > 0.0) || crop > w0.min(h0) as f64 || side < 4 {
+        if crop.is_nan() || crop <= 0.0 || crop > w0.min(h0) as f64 || side < 4 {
             return Err(bad(format!(
                 "[image] crop_px = {crop} does not fit the {w0}×{h0} image at scale {scale} \
                  (the crop must lie inside the image and span at least 4 working pixels)"
@@ -291,7 +313,10 @@ impl Study {
         let layout = Layout::centre_crop(exp.motion.warp, [w0, h0], crop, side);
         let m = &exp.motion;
         if m.patches < 2 {
-            return Err(bad(format!("[motion] patches must be at least 2, got {}", m.patches)));
+            return Err(bad(format!(
+                "[motion] patches must be at least 2, got {}",
+                m.patches
+            )));
         }
         if m.control_points < 4 {
             return Err(bad(format!(
@@ -308,7 +333,9 @@ impl Study {
             ("homography_noise", m.homography_noise),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(bad(format!("[motion] {key} must be finite and ≥ 0, got {v}")));
+                return Err(bad(format!(
+                    "[motion] {key} must be finite and ≥ 0, got {v}"
+                )));
             }
         }
         let t = &exp.train;
@@ -316,10 +343,14 @@ impl Study {
             ("lr_field", t.lr_field),
             ("lr_translation", t.lr_translation),
             ("lr_rotation", t.lr_rotation),
+            ("posenet_lr_translation", t.posenet_lr_translation),
+            ("posenet_lr_rotation", t.posenet_lr_rotation),
             ("lr_homography", t.lr_homography),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(bad(format!("[train] {key} must be finite and ≥ 0, got {v}")));
+                return Err(bad(format!(
+                    "[train] {key} must be finite and ≥ 0, got {v}"
+                )));
             }
         }
         if t.pixels_per_step == 0 || t.methods.is_empty() {
@@ -354,9 +385,15 @@ impl Study {
             every: t.spline_reset_every,
         };
         if t.methods.contains(&Method::Spline) {
-            FreeModel::new(m.warp, spec.patch_times(), spec.time_range(), PoseRates::ZERO, Some(reset))
-                .check()
-                .map_err(|e| bad(format!("[train] {e}")))?;
+            FreeModel::new(
+                m.warp,
+                spec.patch_times(),
+                spec.time_range(),
+                PoseRates::ZERO,
+                Some(reset),
+            )
+            .check()
+            .map_err(|e| bad(format!("[train] {e}")))?;
         }
         let mut methods = t.methods.clone();
         methods.sort();
@@ -379,6 +416,11 @@ impl Study {
                 rotation: t.lr_rotation,
                 homography: t.lr_homography,
             },
+            posenet_rates: PoseRates {
+                translation: t.posenet_lr_translation,
+                rotation: t.posenet_lr_rotation,
+                homography: 0.0,
+            },
             reset,
             methods,
             trajectories: m.trajectories,
@@ -390,23 +432,35 @@ impl Study {
         let [w, h] = [self.image.width() as f64, self.image.height() as f64];
         let long = w.max(h);
         self.spec
-            .sample(seed * 1000 + k as u64, &self.layout.corners, [w / long, h / long])
+            .sample(
+                seed * 1000 + k as u64,
+                &self.layout.corners,
+                [w / long, h / long],
+            )
             .map_err(|e| anyhow::anyhow!("motion {k}: {e}"))
     }
 
-    fn model(&self, method: Method, seed: u64) -> anyhow::Result<PoseModel> {
+    fn model(&self, method: Method, seed: u64) -> anyhow::Result<Box<dyn PoseModel>> {
         let times = self.spec.patch_times();
         let range = self.spec.time_range();
         Ok(match method {
             Method::Posenet => {
                 let mut c = self.posenet.clone();
                 c.seed = c.seed.wrapping_add(seed);
-                PoseModel::Field(FieldModel::new(Box::new(c.init::<f32>(range)?), times, self.rates))
+                Box::new(FieldModel::new(
+                    Box::new(c.init::<f32>(range)?),
+                    times,
+                    self.posenet_rates,
+                ))
             }
-            Method::Barf => {
-                PoseModel::Free(FreeModel::new(self.spec.warp, times, range, self.rates, None))
-            }
-            Method::Spline => PoseModel::Free(FreeModel::new(
+            Method::Barf => Box::new(FreeModel::new(
+                self.spec.warp,
+                times,
+                range,
+                self.rates,
+                None,
+            )),
+            Method::Spline => Box::new(FreeModel::new(
                 self.spec.warp,
                 times,
                 range,
@@ -456,10 +510,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let jobs: Vec<(usize, Method)> = (0..study.trajectories)
         .flat_map(|k| study.methods.iter().map(move |&m| (k, m)))
         .collect();
-    let progress = input.progress(
-        (jobs.len() * study.schedule.iterations) as u64,
-        "aligning",
-    );
+    let progress = input.progress((jobs.len() * study.schedule.iterations) as u64, "aligning");
     let renders = Mutex::new(Vec::new());
     let started = std::time::Instant::now();
     let results: Vec<((usize, Method), RunResult)> = jobs
@@ -474,7 +525,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             let (outcome, wall_s) = train::timed(|| {
                 Trainer::new(
                     field.as_mut(),
-                    &mut model,
+                    model.as_mut(),
                     &study.layout,
                     &patches,
                     study.schedule,
@@ -482,9 +533,16 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 )
                 .run(&|| progress.inc(1))
             });
-            let (final_loss, warps) = outcome
-                .with_context(|| format!("trajectory {k}, method {}", method.key()))?;
-            let rendered = train::render(field.as_mut(), study.image.width(), study.image.height());
+            let (final_loss, warps) =
+                outcome.with_context(|| format!("trajectory {k}, method {}", method.key()))?;
+            let first = Warp::new(study.spec.warp, &warps[0]);
+            let rendered = train::render(
+                field.as_mut(),
+                study.image.width(),
+                study.image.height(),
+                &first,
+            );
+            let warps = train::relative_to_first(study.spec.warp, &warps);
             let result = RunResult {
                 corner_err_px: train::corner_error_px(&study.layout, &warps, &motion.params),
                 psnr_db: train::region_psnr(&rendered, &study.image, &study.layout, &motion.params),
@@ -587,19 +645,29 @@ pub mod render {
     const TRUE: [f32; 3] = [0.1, 0.9, 0.2];
     const ESTIMATED: [f32; 3] = [0.95, 0.15, 0.1];
 
-    /// The image with every patch's true (green) and estimated (red) outline and corners.
-    pub fn overlay(image: &Image, layout: &Layout, truth: &[Vec<f64>], estimated: &[Vec<f64>]) -> Image {
+    /// The image with every patch's true (green, wide) and estimated (red) outline and corners.
+    pub fn overlay(
+        image: &Image,
+        layout: &Layout,
+        truth: &[Vec<f64>],
+        estimated: &[Vec<f64>],
+    ) -> Image {
         let mut out = image.clone();
         let (w, h) = (image.width() as f64, image.height() as f64);
         let long = w.max(h);
         let to_px = |p: [f64; 2]| [(p[0] * long + w) / 2.0, (p[1] * long + h) / 2.0];
-        for (params, colour) in [(truth, TRUE), (estimated, ESTIMATED)] {
+        // True outlines wider, so they show around estimates that cover them.
+        for (params, colour, width) in [(truth, TRUE, 3.0), (estimated, ESTIMATED, 1.0)] {
             for p in params {
                 let warp = Warp::new(layout.warp, p);
-                let quad: Vec<[f64; 2]> = layout.corners.iter().map(|&c| to_px(warp.apply(c))).collect();
-                out.draw_polygon(&quad, colour, 1.0);
+                let quad: Vec<[f64; 2]> = layout
+                    .corners
+                    .iter()
+                    .map(|&c| to_px(warp.apply(c)))
+                    .collect();
+                out.draw_polygon(&quad, colour, width);
                 for &c in &quad {
-                    out.draw_marker(c, colour, 2.0);
+                    out.draw_marker(c, colour, 1.5 * width);
                 }
             }
         }
@@ -611,7 +679,11 @@ pub mod render {
         let h = a.height().max(b.height());
         Image::from_fn(a.width() + b.width(), h, |x, y| {
             if x < a.width() {
-                if y < a.height() { a.pixel(x, y) } else { [0.0; 3] }
+                if y < a.height() {
+                    a.pixel(x, y)
+                } else {
+                    [0.0; 3]
+                }
             } else if y < b.height() {
                 b.pixel(x - a.width(), y)
             } else {
@@ -627,7 +699,11 @@ pub mod render {
         let n = patches.len();
         Image::from_fn(n * side + (n - 1) * gap, side, |x, y| {
             let (i, u) = (x / (side + gap), x % (side + gap));
-            if u >= side { [1.0; 3] } else { patches[i][y * side + u] }
+            if u >= side {
+                [1.0; 3]
+            } else {
+                patches[i][y * side + u]
+            }
         })
     }
 }

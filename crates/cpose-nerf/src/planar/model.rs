@@ -3,18 +3,24 @@
 //!
 //! - `posenet`: a [`PoseField`] of time (PoseNet by default) whose SE(2) part gives the patch
 //!   motions: the twist of its rotation about the optical axis (swing–twist decomposition,
-//!   `θ = 2 atan2(q_z, q_w)`) and its `x, y` translation. The patch warps are taken relative to
-//!   the first patch, `W_i = P(t_0)⁻¹ ∘ P(t_i)`, which fixes the gauge without special cases.
+//!   `θ = 2 atan2(q_z, q_w)`) and its `x, y` translation, taken relative to their mean:
+//!   `W_i = P̄⁻¹ ∘ P(t_i)` with `P̄ = (mean θ, mean t)`. A motion common to all patches then
+//!   changes nothing, so the neural image's frame cannot drift with the poses; the evaluation
+//!   expresses all warps relative to the first patch, `W_0⁻¹ ∘ W_i` (BARF's gauge). Anchoring
+//!   to the first patch during training instead (`P(t_0)⁻¹ ∘ P(t_i)`, or `W_0` held at the
+//!   identity) leaves the whole sequence to one patch's data and falls into minima where every
+//!   other patch shares one offset.
 //! - `barf`: free warp parameters per patch, zero at the start, the first patch held at zero
 //!   (BARF's `warp_param[0] = 0` after every step).
 //! - `spline`: `barf` whose parameters are replaced every `reset_every` steps by their
 //!   least-squares cubic B-spline over the patch times (the paper's "BaRF with B-spline").
 
 use cpose_core::nn::Adam;
+
+use super::motion::relative_se2;
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange, smooth_with_cubic_spline};
 use nalgebra::Quaternion;
 
-use super::motion::relative_se2;
 use crate::warp2d::WarpKind;
 
 /// Learning rates of the pose models (constant, as BARF's planar experiment).
@@ -47,40 +53,17 @@ pub struct SplineReset {
 }
 
 /// A pose model: warp parameters per patch, updated from their gradients.
-pub enum PoseModel {
-    /// A continuous pose field of time.
-    Field(FieldModel),
-    /// Free parameters per patch (BARF), optionally reset to a spline.
-    Free(FreeModel),
+pub trait PoseModel: Send {
+    /// The warp parameters of every patch (`kind.dim()` each, patch-major) into `out`, at
+    /// `progress` (fraction of training done) of the model's coarse-to-fine schedule.
+    fn warps(&mut self, out: &mut Vec<f64>, progress: f64) -> anyhow::Result<()>;
+
+    /// One optimiser step from `grad` (`∂L/∂` the output of the last [`PoseModel::warps`]) at
+    /// step `it` (0-based).
+    fn step(&mut self, grad: &[f64], it: usize) -> anyhow::Result<()>;
 }
 
-impl PoseModel {
-    /// The warp parameters of every patch (`kind.dim()` each, patch-major) into `out`.
-    pub fn warps(&mut self, out: &mut Vec<f64>) -> anyhow::Result<()> {
-        match self {
-            Self::Field(m) => m.warps(out),
-            Self::Free(m) => {
-                out.clear();
-                out.extend_from_slice(&m.params);
-                Ok(())
-            }
-        }
-    }
-
-    /// One optimiser step from `grad` (`∂L/∂` the output of [`PoseModel::warps`]) at step `it`
-    /// (0-based).
-    pub fn step(&mut self, grad: &[f64], it: usize) -> anyhow::Result<()> {
-        match self {
-            Self::Field(m) => m.step(grad),
-            Self::Free(m) => {
-                m.step(grad, it);
-                Ok(())
-            }
-        }
-    }
-}
-
-/// [`PoseModel::Field`]: SE(2) motions from a pose field evaluated at the patch times.
+/// SE(2) motions from a pose field evaluated at the patch times (`posenet`).
 pub struct FieldModel {
     field: Box<dyn PoseField>,
     times: Vec<f64>,
@@ -89,8 +72,11 @@ pub struct FieldModel {
     poses: PoseBatch,
     cotangent: PoseBatch,
     grad: Vec<f32>,
-    /// `[θ, tx, ty]` of every `P(t_i)` of the last evaluation.
+    /// `[θ, tx, ty]` of every `P(t_i)` and their mean, from the last evaluation.
     absolute: Vec<[f64; 3]>,
+    mean: [f64; 3],
+    /// Gradient with respect to `absolute` (reused).
+    g_abs: Vec<[f64; 3]>,
 }
 
 impl FieldModel {
@@ -106,58 +92,66 @@ impl FieldModel {
             cotangent: PoseBatch::default(),
             grad: vec![0.0; n],
             absolute: Vec::new(),
+            mean: [0.0; 3],
+            g_abs: Vec::new(),
         }
     }
+}
 
-    fn warps(&mut self, out: &mut Vec<f64>) -> anyhow::Result<()> {
+impl PoseModel for FieldModel {
+    fn warps(&mut self, out: &mut Vec<f64>, progress: f64) -> anyhow::Result<()> {
+        self.field.set_progress(progress);
         self.field
             .forward(&self.times, Order::Pose, &mut self.poses)?;
+        let n = self.times.len();
         self.absolute.clear();
-        for i in 0..self.times.len() {
-            let q = self.poses.rotation[i];
-            let t = self.poses.translation[i];
-            self.absolute
-                .push([2.0 * q.k.atan2(q.w), t.x, t.y]);
+        self.absolute.extend((0..n).map(|i| {
+            let (q, t) = (self.poses.rotation[i], self.poses.translation[i]);
+            [2.0 * q.k.atan2(q.w), t.x, t.y]
+        }));
+        self.mean = [0.0; 3];
+        for p in &self.absolute {
+            for c in 0..3 {
+                self.mean[c] += p[c] / n as f64;
+            }
         }
         out.clear();
-        for g in &self.absolute {
-            out.extend_from_slice(&relative_se2(&self.absolute[0], g));
+        for p in &self.absolute {
+            out.extend_from_slice(&relative_se2(&self.mean, p));
         }
         Ok(())
     }
 
-    /// Back-propagates `∂L/∂W_i` through `W_i = P_0⁻¹ ∘ P_i` and the twist angle, then steps.
-    ///
-    /// With `W_i = (θ_i − θ_0, R(−θ_0)(t_i − t_0))` and `J = [[0, −1], [1, 0]]`:
-    /// `∂/∂θ_i = g_θ`, `∂/∂t_i = R(θ_0) g_t`, `∂/∂θ_0 −= g_θ + g_tᵀ J t_rel`,
-    /// `∂/∂t_0 −= R(θ_0) g_t`; and `θ = 2 atan2(q_z, q_w)` gives
-    /// `∂θ/∂q_w = −2 q_z/(q_w² + q_z²)`, `∂θ/∂q_z = 2 q_w/(q_w² + q_z²)`.
-    fn step(&mut self, grad: &[f64]) -> anyhow::Result<()> {
+    /// Back-propagates `∂L/∂W_i = (g_θ, g_t)` through the mean gauge and the twist angle, then
+    /// steps. With `W_i = (θ_i − θ̄, R(−θ̄)(t_i − t̄))`, `u_i = R(θ̄) g_t,i` and
+    /// `J = [[0, −1], [1, 0]]`: `∂L/∂θ_i = g_θ,i`, `∂L/∂t_i = u_i`,
+    /// `∂L/∂θ̄ = −Σ_i (g_θ,i + g_t,iᵀ J W_t,i)`, `∂L/∂t̄ = −Σ_i u_i`, each shared `1/N` by every
+    /// patch through the mean. Then `θ = 2 atan2(q_z, q_w)`: `∂θ/∂q_w = −2 q_z/(q_w² + q_z²)`,
+    /// `∂θ/∂q_z = 2 q_w/(q_w² + q_z²)`.
+    fn step(&mut self, grad: &[f64], _it: usize) -> anyhow::Result<()> {
         let n = self.times.len();
-        let mut g_abs = vec![[0.0f64; 3]; n];
-        let theta0 = self.absolute[0][0];
-        let (s0, c0) = theta0.sin_cos();
-        for i in 0..n {
-            let g = &grad[3 * i..3 * i + 3];
-            let rel = relative_se2(&self.absolute[0], &self.absolute[i]);
-            let gt = [c0 * g[1] - s0 * g[2], s0 * g[1] + c0 * g[2]];
-            g_abs[i][0] += g[0];
-            g_abs[i][1] += gt[0];
-            g_abs[i][2] += gt[1];
-            // J t_rel = (−t_rel_y, t_rel_x)
-            g_abs[0][0] -= g[0] + (g[1] * -rel[2] + g[2] * rel[1]);
-            g_abs[0][1] -= gt[0];
-            g_abs[0][2] -= gt[1];
+        let (s, c) = self.mean[0].sin_cos();
+        let mut g_abs = std::mem::take(&mut self.g_abs);
+        g_abs.clear();
+        let mut g_mean = [0.0f64; 3];
+        for (g, p) in grad.chunks(3).zip(&self.absolute) {
+            let w = relative_se2(&self.mean, p);
+            let u = [c * g[1] - s * g[2], s * g[1] + c * g[2]];
+            g_abs.push([g[0], u[0], u[1]]);
+            g_mean[0] -= g[0] + (-g[1] * w[2] + g[2] * w[1]);
+            g_mean[1] -= u[0];
+            g_mean[2] -= u[1];
         }
         self.cotangent.clone_from(&self.poses);
-        for i in 0..n {
-            let q = self.poses.rotation[i];
-            let r2 = q.w * q.w + q.k * q.k;
-            let gq = g_abs[i][0] / r2.max(1e-300);
-            self.cotangent.rotation[i] = Quaternion::new(-2.0 * q.k * gq, 0.0, 0.0, 2.0 * q.w * gq);
-            self.cotangent.translation[i] = nalgebra::Vector3::new(g_abs[i][1], g_abs[i][2], 0.0);
-        }
         clear_derivatives(&mut self.cotangent);
+        for (i, g) in g_abs.iter().enumerate() {
+            let g: [f64; 3] = std::array::from_fn(|k| g[k] + g_mean[k] / n as f64);
+            let q = self.poses.rotation[i];
+            let gq = g[0] / (q.w * q.w + q.k * q.k).max(f64::MIN_POSITIVE);
+            self.cotangent.rotation[i] = Quaternion::new(-2.0 * q.k * gq, 0.0, 0.0, 2.0 * q.w * gq);
+            self.cotangent.translation[i] = nalgebra::Vector3::new(g[1], g[2], 0.0);
+        }
+        self.g_abs = g_abs;
         self.grad.fill(0.0);
         self.field
             .backward(&self.times, &self.cotangent, &mut self.grad)?;
@@ -179,7 +173,7 @@ fn clear_derivatives(c: &mut PoseBatch) {
     c.lin_acc_world.clear();
 }
 
-/// [`PoseModel::Free`]: per-patch warp parameters (BARF), optionally reset to a spline.
+/// Per-patch warp parameters (`barf`), optionally reset to a spline (`spline`).
 pub struct FreeModel {
     kind: WarpKind,
     params: Vec<f64>,
@@ -213,43 +207,6 @@ impl FreeModel {
         }
     }
 
-    fn step(&mut self, grad: &[f64], it: usize) {
-        let k = self.kind.dim();
-        self.grad.copy_from_slice(grad);
-        self.grad[..k].fill(0.0);
-        self.adam.begin_step();
-        let n = self.times.len();
-        for i in 0..n {
-            for c in 0..k {
-                let lr = match (self.kind, c) {
-                    (WarpKind::Se2, 0) => self.rates.rotation,
-                    (WarpKind::Se2, _) => self.rates.translation,
-                    (WarpKind::Homography, _) => self.rates.homography,
-                };
-                let j = i * k + c;
-                self.adam
-                    .update(j, &mut self.params[j..=j], &self.grad[j..=j], lr);
-            }
-        }
-        if let Some(reset) = self.reset
-            && (it + 1) % reset.every == 0
-        {
-            // The spline is fitted through every patch; a failure (too few patches for the
-            // control points) is caught when the model is built.
-            if smooth_with_cubic_spline(
-                self.range,
-                reset.control_points,
-                &self.times,
-                &mut self.params,
-                k,
-            )
-            .is_ok()
-            {
-                self.params[..k].fill(0.0);
-            }
-        }
-    }
-
     /// Checks that the spline reset is possible for these patches.
     pub fn check(&self) -> Result<(), String> {
         if let Some(reset) = self.reset {
@@ -270,6 +227,52 @@ impl FreeModel {
     }
 }
 
+impl PoseModel for FreeModel {
+    fn warps(&mut self, out: &mut Vec<f64>, _progress: f64) -> anyhow::Result<()> {
+        out.clear();
+        out.extend_from_slice(&self.params);
+        Ok(())
+    }
+
+    fn step(&mut self, grad: &[f64], it: usize) -> anyhow::Result<()> {
+        let k = self.kind.dim();
+        self.grad.copy_from_slice(grad);
+        self.grad[..k].fill(0.0);
+        self.adam.begin_step();
+        let n = self.times.len();
+        for i in 0..n {
+            for c in 0..k {
+                let lr = match (self.kind, c) {
+                    (WarpKind::Se2, 0) => self.rates.rotation,
+                    (WarpKind::Se2, _) => self.rates.translation,
+                    (WarpKind::Homography, _) => self.rates.homography,
+                };
+                let j = i * k + c;
+                self.adam
+                    .update(j, &mut self.params[j..=j], &self.grad[j..=j], lr);
+            }
+        }
+        if let Some(reset) = self.reset
+            && (it + 1).is_multiple_of(reset.every)
+        {
+            // The spline is fitted through every patch; a failure (too few patches for the
+            // control points) is caught when the model is built.
+            if smooth_with_cubic_spline(
+                self.range,
+                reset.control_points,
+                &self.times,
+                &mut self.params,
+                k,
+            )
+            .is_ok()
+            {
+                self.params[..k].fill(0.0);
+            }
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -283,7 +286,7 @@ mod tests {
         }
     }
 
-    /// The analytic gradient of a linear loss on the relative warps through the pose field
+    /// The analytic gradient of a linear loss on the warps through the pose field
     /// matches central differences of the same loss in a few network parameters (f32 field,
     /// so a loose tolerance).
     #[test]
@@ -314,13 +317,13 @@ mod tests {
             params_from_slice(&mut field, params).unwrap();
             let mut m = FieldModel::new(Box::new(field), times.clone(), rates());
             let mut w = Vec::new();
-            m.warps(&mut w).unwrap();
+            m.warps(&mut w, 1.0).unwrap();
             w.iter().zip(&weights).map(|(a, b)| a * b).sum()
         };
         // Zero learning rates: the step only fills `grad`.
         let mut model = FieldModel::new(Box::new(net.clone()), times.clone(), PoseRates::ZERO);
-        model.warps(&mut Vec::new()).unwrap();
-        model.step(&weights).unwrap();
+        model.warps(&mut Vec::new(), 1.0).unwrap();
+        model.step(&weights, 0).unwrap();
         let n = p.len();
         for j in [0, n / 7, n / 3, n / 2, n - 5, n - 1] {
             let h = 1e-2f32;
@@ -349,21 +352,20 @@ mod tests {
         };
         let mut m = FreeModel::new(WarpKind::Se2, times, range, rates(), Some(reset));
         m.check().unwrap();
-        let grad: Vec<f64> = (0..21).map(|j| if j % 2 == 0 { 1.0 } else { -1.0 }).collect();
-        m.step(&grad, 0);
+        let grad: Vec<f64> = (0..21)
+            .map(|j| if j % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        m.step(&grad, 0).unwrap();
         assert!(m.params[..3].iter().all(|&v| v == 0.0));
-        assert!(m.params[3] < 0.0, "descends");
+        assert!(m.params[3] > 0.0, "moves against its gradient (−1)");
         let before = m.params.clone();
-        m.step(&grad, 1); // reset after this step
+        m.step(&grad, 1).unwrap(); // reset after this step
         assert!(m.params[..3].iter().all(|&v| v == 0.0));
         assert_ne!(before, m.params);
-        let bad = FreeModel::new(
-            WarpKind::Se2,
-            vec![0.0, 9.0],
-            range,
-            rates(),
-            Some(reset),
+        let bad = FreeModel::new(WarpKind::Se2, vec![0.0, 9.0], range, rates(), Some(reset));
+        assert!(
+            bad.check().is_err(),
+            "two patches cannot carry five control points"
         );
-        assert!(bad.check().is_err(), "two patches cannot carry five control points");
     }
 }

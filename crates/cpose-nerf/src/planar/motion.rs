@@ -72,7 +72,12 @@ impl MotionSpec {
 
     /// Draws a motion from `seed` whose warped `corners` (normalised) all fall inside
     /// `bounds = [x_max, y_max]` (the image is `[−x_max, x_max] × [−y_max, y_max]`).
-    pub fn sample(&self, seed: u64, corners: &[[f64; 2]], bounds: [f64; 2]) -> Result<Motion, String> {
+    pub fn sample(
+        &self,
+        seed: u64,
+        corners: &[[f64; 2]],
+        bounds: [f64; 2],
+    ) -> Result<Motion, String> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let times = self.patch_times();
         for _ in 0..MAX_DRAWS {
@@ -124,7 +129,10 @@ impl MotionSpec {
                 [theta, pose.translation.x, pose.translation.y]
             })
             .collect();
-        Ok(se2.iter().map(|g| relative_se2(&se2[0], g).to_vec()).collect())
+        Ok(se2
+            .iter()
+            .map(|g| relative_se2(&se2[0], g).to_vec())
+            .collect())
     }
 
     fn draw_homography(&self, rng: &mut ChaCha8Rng) -> Vec<Vec<f64>> {
@@ -135,7 +143,9 @@ impl MotionSpec {
                 if i == 0 {
                     return vec![0.0; 8];
                 }
-                let mut p: Vec<f64> = (0..8).map(|_| self.homography_std * gaussian(rng)).collect();
+                let mut p: Vec<f64> = (0..8)
+                    .map(|_| self.homography_std * gaussian(rng))
+                    .collect();
                 p[0] += offsets[(i - 1) % 4][0];
                 p[1] += offsets[(i - 1) % 4][1];
                 p
@@ -173,7 +183,12 @@ mod tests {
         }
     }
 
-    const CORNERS: [[f64; 2]; 4] = [[-0.375, -0.375], [0.375, -0.375], [0.375, 0.375], [-0.375, 0.375]];
+    const CORNERS: [[f64; 2]; 4] = [
+        [-0.375, -0.375],
+        [0.375, -0.375],
+        [0.375, 0.375],
+        [-0.375, 0.375],
+    ];
 
     #[test]
     fn rigid_motions_start_at_identity_stay_inside_and_are_smooth() {
@@ -200,7 +215,11 @@ mod tests {
         let r = relative_se2(&a, &b);
         // a ∘ r == b
         let (s, c) = a[0].sin_cos();
-        let composed = [a[0] + r[0], a[1] + c * r[1] - s * r[2], a[2] + s * r[1] + c * r[2]];
+        let composed = [
+            a[0] + r[0],
+            a[1] + c * r[1] - s * r[2],
+            a[2] + s * r[1] + c * r[2],
+        ];
         for k in 0..3 {
             assert!((composed[k] - b[k]).abs() < 1e-12);
         }

@@ -9,8 +9,8 @@ use rand_chacha::ChaCha8Rng;
 
 use super::model::PoseModel;
 use crate::field2d::ImageField;
-use crate::image::{Image, psnr};
-use crate::warp2d::{Warp, WarpKind};
+use crate::image::{Image, NormalizedFrame, psnr};
+use crate::warp2d::{self, Warp, WarpKind};
 
 /// The patch layout on the working image: the centre crop and its pixel grid.
 #[derive(Clone, Debug)]
@@ -21,14 +21,19 @@ pub struct Layout {
     pub grid: Vec<[f64; 2]>,
     /// The crop's corners (normalised), for the corner error and the renders.
     pub corners: [[f64; 2]; 4],
-    /// Pixels per normalised unit in the ORIGINAL image (`max(W, H)/2`): corner errors in pixels.
-    pub px_per_unit: f64,
+    /// The original image's frame: corner errors are in its pixels.
+    pub frame: NormalizedFrame,
 }
 
 impl Layout {
     /// The square centre crop of `crop_px` pixels of an image of `original_size` (width,
     /// height), sampled on a `side × side` grid of pixel centres.
-    pub fn centre_crop(warp: WarpKind, original_size: [usize; 2], crop_px: f64, side: usize) -> Self {
+    pub fn centre_crop(
+        warp: WarpKind,
+        original_size: [usize; 2],
+        crop_px: f64,
+        side: usize,
+    ) -> Self {
         let long = original_size[0].max(original_size[1]) as f64;
         let half = crop_px / long;
         let grid = (0..side * side)
@@ -44,7 +49,7 @@ impl Layout {
             warp,
             grid,
             corners: [[-half, -half], [half, -half], [half, half], [-half, half]],
-            px_per_unit: long / 2.0,
+            frame: NormalizedFrame::new(original_size[0], original_size[1]),
         }
     }
 }
@@ -94,7 +99,7 @@ pub fn sample_patches(image: &Image, layout: &Layout, truth: &[Vec<f64>]) -> Vec
 /// a step does not allocate).
 pub struct Trainer<'a> {
     field: &'a mut dyn ImageField,
-    model: &'a mut PoseModel,
+    model: &'a mut dyn PoseModel,
     layout: &'a Layout,
     patches: &'a [Vec<[f32; 3]>],
     schedule: Schedule,
@@ -116,7 +121,7 @@ impl<'a> Trainer<'a> {
     /// A trainer at step 0; `seed` drives the pixel draws.
     pub fn new(
         field: &'a mut dyn ImageField,
-        model: &'a mut PoseModel,
+        model: &'a mut dyn PoseModel,
         layout: &'a Layout,
         patches: &'a [Vec<[f32; 3]>],
         schedule: Schedule,
@@ -153,9 +158,9 @@ impl<'a> Trainer<'a> {
         let (per_patch, dim) = (self.layout.grid.len(), self.layout.warp.dim());
         let total = self.patches.len() * per_patch;
         let batch = self.picks.len();
-        self.field
-            .set_progress(self.it as f64 / self.schedule.iterations.max(1) as f64);
-        self.model.warps(&mut self.params)?;
+        let progress = self.it as f64 / self.schedule.iterations.max(1) as f64;
+        self.field.set_progress(progress);
+        self.model.warps(&mut self.params, progress)?;
         self.warps.clear();
         self.warps.extend(
             self.params
@@ -208,8 +213,11 @@ impl<'a> Trainer<'a> {
                 self.warp_grad[i * dim + k] += g[0] * jac[k][0] + g[1] * jac[k][1];
             }
         }
-        self.adam
-            .step(self.field.params_mut(), &self.field_grad, self.schedule.lr_field);
+        self.adam.step(
+            self.field.params_mut(),
+            &self.field_grad,
+            self.schedule.lr_field,
+        );
         self.model.step(&self.warp_grad, self.it)?;
         self.it += 1;
         Ok(loss)
@@ -224,36 +232,55 @@ impl<'a> Trainer<'a> {
             on_step();
         }
         self.field.set_progress(1.0);
-        self.model.warps(&mut self.params)?;
+        self.model.warps(&mut self.params, 1.0)?;
         let dim = self.layout.warp.dim();
         Ok((loss, self.params.chunks(dim).map(<[f64]>::to_vec).collect()))
     }
 }
 
-/// Corner error (pixels of the original image) averaged over patches `1..` and their corners:
-/// the first patch is the gauge and exact by construction.
-pub fn corner_error_px(layout: &Layout, estimated: &[Vec<f64>], truth: &[Vec<f64>]) -> f64 {
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for (e, t) in estimated.iter().zip(truth).skip(1) {
-        let (we, wt) = (Warp::new(layout.warp, e), Warp::new(layout.warp, t));
-        for &c in &layout.corners {
-            let (a, b) = (we.apply(c), wt.apply(c));
-            sum += (a[0] - b[0]).hypot(a[1] - b[1]) * layout.px_per_unit;
-            count += 1;
+/// Warps expressed relative to the first patch, `W_0⁻¹ ∘ W_i`: the gauge in which the ground
+/// truth is given (BARF's, whose first warp is held at the identity). Rigid warps are composed
+/// exactly; homography models hold their first patch at zero, so theirs are returned as they are.
+pub fn relative_to_first(kind: WarpKind, warps: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    match (kind, warps.first()) {
+        (WarpKind::Se2, Some(first)) => {
+            let first = [first[0], first[1], first[2]];
+            warps
+                .iter()
+                .map(|w| super::motion::relative_se2(&first, &[w[0], w[1], w[2]]).to_vec())
+                .collect()
         }
+        _ => warps.to_vec(),
     }
-    sum / count.max(1) as f64
 }
 
-/// The neural image rendered at every pixel of a `width × height` frame (normalised as BARF).
-pub fn render(field: &mut dyn ImageField, width: usize, height: usize) -> Image {
+/// Corner error (pixels of the original image) averaged over patches `1..` and their corners,
+/// of warps relative to the first patch (see [`relative_to_first`]; the first is exact by
+/// construction).
+pub fn corner_error_px(layout: &Layout, estimated: &[Vec<f64>], truth: &[Vec<f64>]) -> f64 {
+    let errors: Vec<f64> = estimated
+        .iter()
+        .zip(truth)
+        .skip(1)
+        .map(|(e, t)| warp2d::corner_error_px(layout.warp, e, t, &layout.corners, &layout.frame))
+        .collect();
+    errors.iter().sum::<f64>() / errors.len().max(1) as f64
+}
+
+/// The neural image rendered at every pixel of a `width × height` frame (normalised as BARF),
+/// seen through the first patch's estimated warp `first` (the image frame is where the first
+/// patch puts the centre crop).
+pub fn render(field: &mut dyn ImageField, width: usize, height: usize, first: &Warp) -> Image {
     let long = width.max(height) as f64;
     let mut points = Vec::with_capacity(2 * width * height);
     for y in 0..height {
         for x in 0..width {
-            points.push(((2.0 * (x as f64 + 0.5) - width as f64) / long) as f32);
-            points.push(((2.0 * (y as f64 + 0.5) - height as f64) / long) as f32);
+            let [u, v] = first.apply([
+                (2.0 * (x as f64 + 0.5) - width as f64) / long,
+                (2.0 * (y as f64 + 0.5) - height as f64) / long,
+            ]);
+            points.push(u as f32);
+            points.push(v as f32);
         }
     }
     let mut rgb = vec![0.0f32; 3 * width * height];
