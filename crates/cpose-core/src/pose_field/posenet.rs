@@ -839,6 +839,45 @@ mod tests {
         }
     }
 
+    /// Coarse-to-fine on the time bands: all bands off at progress 0, fractional in between
+    /// (and still exact derivatives and gradients), and the plain network from `end` on.
+    #[test]
+    fn coarse_to_fine_schedule_on_time_bands() {
+        let plain = small(Activation::Softplus);
+        let c2f = PoseNetConfig {
+            c2f: [0.1, 0.6],
+            ..plain.clone()
+        };
+        let mut net = c2f.init::<f64>(range()).unwrap();
+        let mut reference = plain.init::<f64>(range()).unwrap();
+        perturb(&mut net, 3);
+        perturb(&mut reference, 3);
+        let eval = |n: &PoseNet<f64>| {
+            let mut out = PoseBatch::default();
+            n.evaluate(&TIMES, Order::Velocity, &mut out).unwrap();
+            out
+        };
+        assert!(net.embedding.weights().iter().all(|&w| w == 0.0));
+        assert_ne!(eval(&net).translation, eval(&reference).translation);
+        net.set_progress(0.35);
+        assert!(net.embedding.weights().iter().any(|&w| w > 0.0 && w < 1.0));
+        let tol = crate::testing::Tolerances {
+            time_derivative: 1e-4,
+            ..Default::default()
+        };
+        crate::testing::check_pose_field_with(&mut net, &TIMES, &tol);
+        net.set_progress(0.6);
+        assert_eq!(eval(&net).translation, eval(&reference).translation);
+        assert!(
+            PoseNetConfig {
+                c2f: [0.0, 1.5],
+                ..plain
+            }
+            .init::<f64>(range())
+            .is_err()
+        );
+    }
+
     #[test]
     fn time_derivatives_softplus() {
         check_time_derivatives(small(Activation::Softplus));
