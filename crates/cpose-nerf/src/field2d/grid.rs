@@ -422,7 +422,7 @@ impl<S: Real> ImageField<S> for GridField<S> {
 mod tests {
     use rand::seq::index::sample;
 
-    use super::super::test_support::{check_gradients, points};
+    use super::super::test_support::{assert_f32_matches_f64, check_gradients, points};
     use super::*;
 
     /// Resolutions 4, 8, 16, 32; two features; MLP 10 → 16 → 16 → 3.
@@ -587,27 +587,7 @@ mod tests {
         }
         a.set_progress(0.3);
         b.set_progress(0.3);
-        let pts = points(64, 2, |_, _| false);
-        let pts32: Vec<f32> = pts.iter().map(|&p| p as f32).collect();
-        let pts: Vec<f64> = pts32.iter().map(|&p| p as f64).collect();
-        let (mut ra, mut rb) = (vec![0.0; 192], vec![0.0f32; 192]);
-        a.forward(&pts, &mut ra);
-        b.forward(&pts32, &mut rb);
-        for (x, y) in ra.iter().zip(&rb) {
-            assert!((x - *y as f64).abs() < 1e-5, "{x} vs {y}");
-        }
-        let g: Vec<f64> = (0..192).map(|k| (k as f64 * 0.37).sin()).collect();
-        let g32: Vec<f32> = g.iter().map(|&v| v as f32).collect();
-        let (mut ga, mut gb) = (vec![0.0; a.num_params()], vec![0.0f32; b.num_params()]);
-        let (mut pa, mut pb) = (vec![0.0; 128], vec![0.0f32; 128]);
-        a.backward(&g, &mut ga, &mut pa);
-        b.backward(&g32, &mut gb, &mut pb);
-        for (x, y) in [(ga, gb), (pa, pb)] {
-            let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            for (x, y) in x.iter().zip(&y) {
-                assert!((x - *y as f64).abs() < 1e-4 * scale, "{x} vs {y}");
-            }
-        }
+        assert_f32_matches_f64(&mut a, &mut b, &points(64, 2, |_, _| false));
     }
 
     #[test]

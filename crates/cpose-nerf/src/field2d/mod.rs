@@ -225,6 +225,36 @@ mod test_support {
         p
     }
 
+    /// The `f32` field `b` agrees with the `f64` field `a` (same parameters and progress) on
+    /// colours (1e-5) and on parameter and point gradients (1e-4 of the largest), at `points`.
+    pub fn assert_f32_matches_f64(
+        a: &mut dyn ImageField<f64>,
+        b: &mut dyn ImageField<f32>,
+        points: &[f64],
+    ) {
+        let n = points.len() / 2;
+        let pts32: Vec<f32> = points.iter().map(|&p| p as f32).collect();
+        let pts: Vec<f64> = pts32.iter().map(|&p| f64::from(p)).collect();
+        let (mut ra, mut rb) = (vec![0.0; 3 * n], vec![0.0f32; 3 * n]);
+        a.forward(&pts, &mut ra);
+        b.forward(&pts32, &mut rb);
+        for (x, y) in ra.iter().zip(&rb) {
+            assert!((x - f64::from(*y)).abs() < 1e-5, "{x} vs {y}");
+        }
+        let g: Vec<f64> = (0..3 * n).map(|k| (k as f64 * 0.37).sin()).collect();
+        let g32: Vec<f32> = g.iter().map(|&v| v as f32).collect();
+        let (mut ga, mut gb) = (vec![0.0; a.num_params()], vec![0.0f32; b.num_params()]);
+        let (mut pa, mut pb) = (vec![0.0; 2 * n], vec![0.0f32; 2 * n]);
+        a.backward(&g, &mut ga, &mut pa);
+        b.backward(&g32, &mut gb, &mut pb);
+        for (x, y) in [(ga, gb), (pa, pb)] {
+            let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (x, y) in x.iter().zip(&y) {
+                assert!((x - f64::from(*y)).abs() < 1e-4 * scale, "{x} vs {y}");
+            }
+        }
+    }
+
     /// `L = Σ c ⊙ rgb` with fixed cotangents `c`.
     fn loss(field: &mut dyn ImageField<f64>, points: &[f64], c: &[f64]) -> f64 {
         let mut rgb = vec![0.0; c.len()];

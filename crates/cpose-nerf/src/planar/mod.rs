@@ -395,6 +395,13 @@ impl Study {
             .check()
             .map_err(|e| bad(format!("[train] {e}")))?;
         }
+        if t.methods.contains(&Method::Posenet) {
+            posenet
+                .init::<f32>(spec.time_range())
+                .map_err(|e| bad(format!("[posenet] {e}")))?;
+        }
+        let field = FieldChoice::from_section(&config.section("field"))?;
+        field.init(0).map_err(|e| bad(format!("[field] {e}")))?;
         let mut methods = t.methods.clone();
         methods.sort();
         methods.dedup();
@@ -404,7 +411,7 @@ impl Study {
             original_size: [w0, h0],
             layout,
             spec,
-            field: FieldChoice::from_section(&config.section("field"))?,
+            field,
             posenet,
             schedule: Schedule {
                 iterations: input.run.iterations(t.iterations),
