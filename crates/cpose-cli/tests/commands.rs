@@ -264,5 +264,5 @@ fn planar_rejects_bad_input_with_one_clear_line() {
 fn cpose_nerf_image(path: &Path, width: usize, height: usize) {
     cpose_nerf::image::procedural_texture(width, height, 0)
         .save_png(path)
-        .unwrap();
+        .expect("the test folder is writable");
 }
