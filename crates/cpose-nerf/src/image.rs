@@ -182,41 +182,30 @@ impl Image {
     /// Errors name the file: [`ImageError::Read`] (missing or unreadable),
     /// [`ImageError::UnsupportedFormat`] (neither PNG nor JPEG), [`ImageError::Decode`] (corrupt).
     pub fn load(path: impl AsRef<Path>) -> Result<Image, ImageError> {
-        let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|error| ImageError::Read {
-            path: path.to_path_buf(),
-            error,
-        })?;
-        let format = match ::image::guess_format(&bytes) {
-            Ok(f @ (::image::ImageFormat::Png | ::image::ImageFormat::Jpeg)) => f,
-            Ok(other) => {
-                return Err(ImageError::UnsupportedFormat {
-                    path: path.to_path_buf(),
-                    found: format!("{other:?} data"),
-                });
-            }
-            Err(_) => {
-                return Err(ImageError::UnsupportedFormat {
-                    path: path.to_path_buf(),
-                    found: "unrecognised data".to_owned(),
-                });
-            }
-        };
-        let format_name = if format == ::image::ImageFormat::Png {
-            "PNG"
-        } else {
-            "JPEG"
-        };
-        let decoded = ::image::load_from_memory_with_format(&bytes, format).map_err(|error| {
-            ImageError::Decode {
-                path: path.to_path_buf(),
-                format: format_name,
-                error,
-            }
-        })?;
-        let rgb = decoded.into_rgb32f();
+        let rgb = decode(path.as_ref())?.into_rgb32f();
         let (width, height) = (rgb.width() as usize, rgb.height() as usize);
         Image::new(width, height, rgb.into_raw())
+    }
+
+    /// Loads a PNG or JPEG file like [`Image::load`] and composites it over the opaque colour
+    /// `background`: `rgb = α·rgb_file + (1 − α)·background` per pixel, with α in `[0, 1]`
+    /// (images without alpha have α = 1 and load unchanged). This is how NeRF-synthetic RGBA
+    /// renders are turned into RGB (BARF: white background, `bgcolor: 1`).
+    pub fn load_rgba_over(
+        path: impl AsRef<Path>,
+        background: [f32; 3],
+    ) -> Result<Image, ImageError> {
+        let rgba = decode(path.as_ref())?.into_rgba32f();
+        let (width, height) = (rgba.width() as usize, rgba.height() as usize);
+        let data = rgba
+            .into_raw()
+            .chunks_exact(4)
+            .flat_map(|p| {
+                let a = p[3].clamp(0.0, 1.0);
+                [0, 1, 2].map(|c| a * p[c] + (1.0 - a) * background[c])
+            })
+            .collect();
+        Image::new(width, height, data)
     }
 
     /// Saves as an 8-bit RGB PNG, atomically ([`cpose_core::fs::write_atomic`]): the file is
@@ -673,6 +662,43 @@ fn unit_f64(h: u64) -> f64 {
     (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
+/// Reads and decodes a PNG or JPEG file (format detected from the bytes), with errors naming
+/// the file (see [`Image::load`]).
+fn decode(path: &Path) -> Result<::image::DynamicImage, ImageError> {
+    let bytes = std::fs::read(path).map_err(|error| ImageError::Read {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let format = match ::image::guess_format(&bytes) {
+        Ok(f @ (::image::ImageFormat::Png | ::image::ImageFormat::Jpeg)) => f,
+        Ok(other) => {
+            return Err(ImageError::UnsupportedFormat {
+                path: path.to_path_buf(),
+                found: format!("{other:?} data"),
+            });
+        }
+        Err(_) => {
+            return Err(ImageError::UnsupportedFormat {
+                path: path.to_path_buf(),
+                found: "unrecognised data".to_owned(),
+            });
+        }
+    };
+    let format_name = if format == ::image::ImageFormat::Png {
+        "PNG"
+    } else {
+        "JPEG"
+    };
+    let decoded = ::image::load_from_memory_with_format(&bytes, format).map_err(|error| {
+        ImageError::Decode {
+            path: path.to_path_buf(),
+            format: format_name,
+            error,
+        }
+    })?;
+    Ok(decoded)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -807,6 +833,23 @@ mod tests {
         assert!(
             (p[0] - 200.0 / 255.0).abs() < 0.02 && (p[2] - 50.0 / 255.0).abs() < 0.02,
             "{p:?}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn load_rgba_over_composites_on_the_background() {
+        let dir = temp_dir("rgba-over");
+        let rgba = ::image::RgbaImage::from_raw(2, 1, vec![255, 0, 0, 255, 0, 0, 255, 51]).unwrap();
+        rgba.save(dir.join("a.png")).unwrap();
+        let img = Image::load_rgba_over(dir.join("a.png"), [1.0, 1.0, 1.0]).unwrap();
+        let expect = [1.0, 0.0, 0.0, 0.8, 0.8, 1.0];
+        assert!(
+            img.data()
+                .iter()
+                .zip(&expect)
+                .all(|(a, b)| (a - b).abs() < 1e-6),
+            "{img:?}"
         );
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -6,7 +6,9 @@
 
 pub use cpose_core;
 
+pub mod data;
 pub mod field2d;
 pub mod image;
+pub mod metrics;
 pub mod planar;
 pub mod warp2d;

@@ -1,0 +1,477 @@
+//! LLFF forward-facing scenes (`poses_bounds.npy` + `images_N/`), as released by the LLFF and
+//! NeRF authors and used by BARF (`data/llff.py`).
+//!
+//! # Layout
+//!
+//! `<scene>/poses_bounds.npy` is an `N × 17` little-endian float64 array (NPY v1–v3, C order).
+//! Row `i` is a `3 × 5` matrix `M` stored row-major, then `near`, `far`:
+//!
+//! * `M[:, 0..3] = R_llff`: camera-to-world rotation whose columns are the camera axes in world
+//!   coordinates, in LLFF's order **[down, right, backwards]**;
+//! * `M[:, 3] = c`: the camera centre in world coordinates;
+//! * `M[:, 4] = (H, W, f)`: height, width and focal length of the **original** photos;
+//! * `near, far`: depth bounds of the scene seen by that camera (COLMAP point depths).
+//!
+//! `<scene>/images_N/` (or `images/` for `N = 1`) holds the photos downscaled by `N`, sorted by
+//! file name in the same order as the rows.
+//!
+//! # Axis conversion
+//!
+//! OpenCV axes are (right, down, forward) = (LLFF column 1, LLFF column 0, −LLFF column 2), so
+//!
+//! `R_cv = R_llff · P`, `P = [[0, 1, 0], [1, 0, 0], [0, 0, −1]]` (`det P = +1`),
+//!
+//! i.e. `R_cv = [r₁ | r₀ | −r₂]` for `R_llff = [r₀ | r₁ | r₂]`. (NeRF's loader first builds the
+//! OpenGL frame `[r₁ | −r₀ | r₂]` = (right, up, back); right-multiplying that by `diag(1, −1, −1)`
+//! gives the same `R_cv`.) The centre is unchanged: `world_from_camera = [R_cv | c]`.
+//!
+//! # Intrinsics
+//!
+//! With the loaded image size `w × h`, `fx = fy = f · w / W` and the principal point is the image
+//! centre `(w/2, h/2)`.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::{DataError, Dataset, Intrinsics, isometry_from_rt, load_same_size};
+use crate::image::Image;
+
+/// `P` with `R_cv = R_llff · P` (see the module docs): LLFF (down, right, back) columns to
+/// OpenCV (right, down, forward).
+pub fn cv_from_llff_axes() -> Matrix3<f64> {
+    Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0)
+}
+
+/// Loads the LLFF scene in `scene_dir` at downscale `factor` (images from `images_{factor}/`,
+/// or `images/` when `factor == 1`). Images are sorted by file name (`.png`, `.jpg`, `.jpeg`,
+/// any case); `bounds` holds each row's `[near, far]`.
+///
+/// Errors name the file or folder: a missing folder or `poses_bounds.npy`, an NPY file that is
+/// not `<f8`, C order, shape `(N, 17)`, a pose whose rotation is not orthonormal, a number of
+/// images different from `N`, images of different sizes, or an unreadable image.
+pub fn load_llff(scene_dir: impl AsRef<Path>, factor: u32) -> Result<Dataset, DataError> {
+    let scene_dir = scene_dir.as_ref();
+    let npy_path = scene_dir.join("poses_bounds.npy");
+    let (rows, values) = read_npy_f64_matrix(&npy_path, 17)?;
+
+    let folder = if factor == 1 {
+        scene_dir.join("images")
+    } else {
+        scene_dir.join(format!("images_{factor}"))
+    };
+    let paths = list_images(&folder)?;
+    if paths.len() != rows {
+        return Err(DataError::Format {
+            path: folder,
+            expected: format!("{rows} images, one per row of {}", npy_path.display()),
+            found: format!("{} images", paths.len()),
+        });
+    }
+    let (images, (width, height)) = load_same_size(&paths, &folder, |p| Image::load(p))?;
+
+    let permutation = cv_from_llff_axes();
+    let mut world_from_camera = Vec::with_capacity(rows);
+    let mut bounds = Vec::with_capacity(rows);
+    let mut hwf0 = None;
+    for (i, row) in values.chunks_exact(17).enumerate() {
+        let m = |r: usize, c: usize| row[5 * r + c];
+        let r_llff = Matrix3::from_fn(m);
+        let centre = Vector3::new(m(0, 3), m(1, 3), m(2, 3));
+        let what = format!("row {i}");
+        world_from_camera.push(isometry_from_rt(
+            r_llff * permutation,
+            centre,
+            &npy_path,
+            &what,
+        )?);
+        let (near, far) = (row[15], row[16]);
+        if !(near.is_finite() && far.is_finite() && 0.0 < near && near < far) {
+            return Err(DataError::Format {
+                path: npy_path,
+                expected: format!("{what}: bounds 0 < near < far"),
+                found: format!("near = {near}, far = {far}"),
+            });
+        }
+        bounds.push([near, far]);
+        hwf0.get_or_insert([m(0, 4), m(1, 4), m(2, 4)]);
+    }
+    // `rows ≥ 1` since it equals the (non-empty) number of images.
+    let [_, w0, f0] = hwf0.unwrap_or([f64::NAN; 3]);
+    if !(w0.is_finite() && w0 > 0.0 && f0.is_finite() && f0 > 0.0) {
+        return Err(DataError::Format {
+            path: npy_path,
+            expected: "row 0: positive original width W and focal f".to_owned(),
+            found: format!("W = {w0}, f = {f0}"),
+        });
+    }
+    let focal = f0 * width as f64 / w0;
+    let names = paths
+        .iter()
+        .map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .collect::<Option<Vec<_>>>()
+        .unwrap_or_default();
+    Ok(Dataset {
+        images,
+        world_from_camera,
+        camera: Intrinsics {
+            width,
+            height,
+            fx: focal,
+            fy: focal,
+            cx: width as f64 / 2.0,
+            cy: height as f64 / 2.0,
+        },
+        bounds: Some(bounds),
+        names,
+    })
+}
+
+/// The image files (`.png`, `.jpg`, `.jpeg`, any case) of `folder`, sorted by file name.
+fn list_images(folder: &Path) -> Result<Vec<PathBuf>, DataError> {
+    let io_err = |error| DataError::Io {
+        path: folder.to_path_buf(),
+        error,
+    };
+    let mut paths = Vec::new();
+    for entry in std::fs::read_dir(folder).map_err(io_err)? {
+        let path = entry.map_err(io_err)?.path();
+        let is_image = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"));
+        if is_image && path.is_file() {
+            paths.push(path);
+        }
+    }
+    // Same folder, so ordering the paths orders the file names.
+    paths.sort();
+    Ok(paths)
+}
+
+/// Reads a 2-D little-endian float64 NPY array with `cols` columns: format versions 1.0 (2-byte
+/// header length) and 2.0 / 3.0 (4-byte), header dict with `'descr': '<f8'`,
+/// `'fortran_order': False` and `'shape': (N, cols)`, `N ≥ 1`. Returns `N` and the row-major
+/// values. Anything else is a [`DataError::Format`] naming the file and what was expected.
+pub fn read_npy_f64_matrix(path: &Path, cols: usize) -> Result<(usize, Vec<f64>), DataError> {
+    let bytes = std::fs::read(path).map_err(|error| DataError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let bad = |expected: &str, found: String| DataError::Format {
+        path: path.to_path_buf(),
+        expected: expected.to_owned(),
+        found,
+    };
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err(bad(
+            "an NPY file (magic \\x93NUMPY)",
+            format!("{} bytes without that magic", bytes.len()),
+        ));
+    }
+    let (header_len, header_start) = match bytes[6] {
+        1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        v => {
+            return Err(bad(
+                "NPY format version 1, 2 or 3",
+                format!("version {v}.{}", bytes[7]),
+            ));
+        }
+    };
+    let data_start = header_start + header_len;
+    let header = bytes
+        .get(header_start..data_start)
+        .and_then(|h| std::str::from_utf8(h).ok())
+        .ok_or_else(|| {
+            bad(
+                "a complete text NPY header",
+                "a truncated header".to_owned(),
+            )
+        })?;
+    let descr = dict_value(header, "descr");
+    if !matches!(descr, Some("'<f8'" | "\"<f8\"")) {
+        return Err(bad(
+            "'descr': '<f8' (little-endian float64)",
+            format!("header {}", header.trim()),
+        ));
+    }
+    if dict_value(header, "fortran_order") != Some("False") {
+        return Err(bad(
+            "'fortran_order': False",
+            format!("header {}", header.trim()),
+        ));
+    }
+    let shape: Option<Vec<usize>> = dict_value(header, "shape").and_then(|s| {
+        s.strip_prefix('(')?
+            .strip_suffix(')')?
+            .split(',')
+            .map(str::trim)
+            .filter(|p| !p.is_empty())
+            .map(|p| p.parse().ok())
+            .collect()
+    });
+    let rows = match shape.as_deref() {
+        Some(&[rows, c]) if c == cols && rows >= 1 => rows,
+        _ => {
+            return Err(bad(
+                &format!("'shape': (N, {cols}) with N ≥ 1"),
+                format!("header {}", header.trim()),
+            ));
+        }
+    };
+    let data = &bytes[data_start..];
+    if data.len() != 8 * rows * cols {
+        return Err(bad(
+            &format!("{} data bytes for shape ({rows}, {cols})", 8 * rows * cols),
+            format!("{} bytes", data.len()),
+        ));
+    }
+    let values = data
+        .chunks_exact(8)
+        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+        .collect();
+    Ok((rows, values))
+}
+
+/// The raw text of `key`'s value in a Python dict literal such as
+/// `{'descr': '<f8', 'fortran_order': False, 'shape': (20, 17), }`: up to the next top-level
+/// comma (commas inside parentheses belong to the value), trimmed.
+fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
+    let start = ["'", "\""].iter().find_map(|q| {
+        header
+            .find(&format!("{q}{key}{q}"))
+            .map(|i| i + key.len() + 2)
+    })?;
+    let rest = header[start..].trim_start().strip_prefix(':')?;
+    let mut depth = 0i32;
+    let end = rest
+        .char_indices()
+        .find(|&(_, ch)| {
+            match ch {
+                '(' => depth += 1,
+                ')' => depth -= 1,
+                _ => {}
+            }
+            (ch == ',' && depth == 0) || ch == '}'
+        })
+        .map_or(rest.len(), |(i, _)| i);
+    Some(rest[..end].trim())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("cpose-llff-test-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    /// An NPY v1 file with the given header dict and values.
+    fn write_npy(path: &Path, dict: &str, values: &[f64]) {
+        let mut header = dict.to_owned();
+        while !(10 + header.len() + 1).is_multiple_of(64) {
+            header.push(' ');
+        }
+        header.push('\n');
+        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+        bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        bytes.extend_from_slice(header.as_bytes());
+        for v in values {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        std::fs::write(path, bytes).unwrap();
+    }
+
+    /// One LLFF row: identity-ish LLFF rotation columns (down, right, back) = world (x, y, z).
+    fn row(centre: [f64; 3]) -> Vec<f64> {
+        let mut r = vec![0.0; 17];
+        let m = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let hwf = [30.0, 40.0, 50.0];
+        for (i, m_row) in m.iter().enumerate() {
+            r[5 * i..5 * i + 3].copy_from_slice(m_row);
+            r[5 * i + 3] = centre[i];
+            r[5 * i + 4] = hwf[i];
+        }
+        r[15] = 1.0;
+        r[16] = 10.0;
+        r
+    }
+
+    #[test]
+    fn npy_header_is_parsed_and_bad_headers_are_rejected() {
+        let dir = temp_dir("npy");
+        let path = dir.join("poses_bounds.npy");
+        let values: Vec<f64> = [row([1.0, 2.0, 3.0]), row([4.0, 5.0, 6.0])].concat();
+        write_npy(
+            &path,
+            "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 17), }",
+            &values,
+        );
+        let (rows, read) = read_npy_f64_matrix(&path, 17).unwrap();
+        assert_eq!((rows, read), (2, values.clone()));
+        for (dict, needle) in [
+            (
+                "{'descr': '<f4', 'fortran_order': False, 'shape': (2, 17), }",
+                "<f8",
+            ),
+            (
+                "{'descr': '<f8', 'fortran_order': True, 'shape': (2, 17), }",
+                "fortran_order",
+            ),
+            (
+                "{'descr': '<f8', 'fortran_order': False, 'shape': (17, 2), }",
+                "(N, 17)",
+            ),
+            (
+                "{'descr': '<f8', 'fortran_order': False, 'shape': (34,), }",
+                "(N, 17)",
+            ),
+        ] {
+            write_npy(&path, dict, &values);
+            let err = read_npy_f64_matrix(&path, 17).unwrap_err().to_string();
+            assert!(
+                err.contains(needle) && err.contains("poses_bounds.npy"),
+                "{err}"
+            );
+        }
+        write_npy(
+            &path,
+            "{'descr': '<f8', 'fortran_order': False, 'shape': (3, 17), }",
+            &values,
+        );
+        let err = read_npy_f64_matrix(&path, 17).unwrap_err().to_string();
+        assert!(err.contains("data bytes"), "{err}");
+        std::fs::write(&path, b"not numpy at all").unwrap();
+        assert!(read_npy_f64_matrix(&path, 17).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn synthetic_scene_loads_with_permuted_axes_and_scaled_focal() {
+        let dir = temp_dir("scene");
+        let values: Vec<f64> = [row([1.0, 2.0, 3.0]), row([4.0, 5.0, 6.0])].concat();
+        let dict = "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 17), }";
+        write_npy(&dir.join("poses_bounds.npy"), dict, &values);
+        // Missing image folder.
+        let err = load_llff(&dir, 4).unwrap_err().to_string();
+        assert!(err.contains("images_4"), "{err}");
+        let folder = dir.join("images_4");
+        std::fs::create_dir_all(&folder).unwrap();
+        let grey = |v: f32| Image::from_fn(10, 8, move |_, _| [v; 3]);
+        grey(0.2).save_png(folder.join("b.png")).unwrap();
+        // N mismatch: one image for two rows.
+        let err = load_llff(&dir, 4).unwrap_err().to_string();
+        assert!(
+            err.contains("2 images") && err.contains("got 1 images"),
+            "{err}"
+        );
+        grey(0.8).save_png(folder.join("a.png")).unwrap();
+        let data = load_llff(&dir, 4).unwrap();
+        assert_eq!(data.names, ["a.png", "b.png"]);
+        assert!((data.images[0].pixel(0, 0)[0] - 0.8).abs() < 1e-2);
+        // f = 50 at W = 40 → 12.5 at width 10; principal point at the centre.
+        let cam = data.camera;
+        assert_eq!((cam.width, cam.height), (10, 8));
+        assert_eq!((cam.fx, cam.fy, cam.cx, cam.cy), (12.5, 12.5, 5.0, 4.0));
+        assert_eq!(
+            data.bounds.as_deref(),
+            Some(&[[1.0, 10.0], [1.0, 10.0]][..])
+        );
+        // LLFF columns (down, right, back) = world (x, y, z), so OpenCV (right, down, forward)
+        // = world (y, x, −z).
+        let pose = data.world_from_camera[1];
+        let r = pose.rotation.to_rotation_matrix();
+        let expect = Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0);
+        assert!((r.matrix() - expect).amax() < 1e-12);
+        assert_eq!(pose.translation.vector, Vector3::new(4.0, 5.0, 6.0));
+        // Different sizes.
+        Image::from_fn(9, 8, |_, _| [0.0; 3])
+            .save_png(folder.join("b.png"))
+            .unwrap();
+        let err = load_llff(&dir, 4).unwrap_err().to_string();
+        assert!(err.contains("b.png") && err.contains("10×8"), "{err}");
+        // Missing npy.
+        let err = load_llff(dir.join("nowhere"), 4).unwrap_err().to_string();
+        assert!(err.contains("poses_bounds.npy"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The COLMAP sparse points of fern (`sparse/0/points3D.bin`): per point `u64 id, 3 × f64
+    /// xyz, 3 × u8 rgb, f64 error, u64 track length, track × (i32, i32)`.
+    fn colmap_points(path: &Path) -> Vec<Vector3<f64>> {
+        let b = std::fs::read(path).unwrap();
+        let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+        let f64_at = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+        let n = u64_at(0) as usize;
+        let mut o = 8;
+        let mut points = Vec::with_capacity(n);
+        for _ in 0..n {
+            points.push(Vector3::new(f64_at(o + 8), f64_at(o + 16), f64_at(o + 24)));
+            o += 8 + 24 + 3 + 8;
+            let track = u64_at(o) as usize;
+            o += 8 + 8 * track;
+        }
+        assert_eq!(o, b.len());
+        points
+    }
+
+    #[test]
+    fn fern_cameras_look_at_the_colmap_points_with_opencv_axes() {
+        let Some(data_dir) = cpose_core::fs::shared_data_dir() else {
+            println!("skipped: shared data folder ../shared/data not found");
+            return;
+        };
+        let scene = data_dir.join("llff/fern");
+        let data = load_llff(&scene, 8).unwrap();
+        assert_eq!(data.len(), 20);
+        assert_eq!((data.camera.width, data.camera.height), (504, 378));
+        // Original 4032 wide, focal ≈ 3260.5 → ×504/4032.
+        assert!(
+            (data.camera.fx - 3260.526 / 8.0).abs() < 0.01,
+            "{:?}",
+            data.camera
+        );
+        assert_eq!(data.names[0], "image000.png");
+        let points = colmap_points(&scene.join("sparse/0/points3D.bin"));
+        let bounds = data.bounds.as_ref().unwrap();
+        for (i, pose) in data.world_from_camera.iter().enumerate() {
+            let r = pose.rotation.to_rotation_matrix();
+            assert!((r.matrix().determinant() - 1.0).abs() < 1e-9);
+            let [near, far] = bounds[i];
+            let cam_points: Vec<_> = points
+                .iter()
+                .map(|p| pose.inverse_transform_point(&Point3::from(*p)))
+                .collect();
+            // The scene lies in front (+z) within LLFF's bounds …
+            let in_depth = cam_points
+                .iter()
+                .filter(|p| p.z > 0.9 * near && p.z < 1.1 * far)
+                .count();
+            assert!(in_depth as f64 > 0.99 * points.len() as f64, "camera {i}");
+            // … and projects into the image (x right, y down; swapping x and y drops this to
+            // about 0.83 on this scene).
+            let c = data.camera;
+            let inside = cam_points
+                .iter()
+                .filter(|p| {
+                    let (u, v) = (c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy);
+                    p.z > 0.0
+                        && (0.0..c.width as f64).contains(&u)
+                        && (0.0..c.height as f64).contains(&v)
+                })
+                .count();
+            assert!(
+                inside as f64 > 0.95 * points.len() as f64,
+                "camera {i}: {inside}"
+            );
+        }
+    }
+}

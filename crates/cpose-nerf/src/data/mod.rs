@@ -1,0 +1,174 @@
+//! Real multi-view datasets for the `nerf` task: LLFF forward-facing scenes ([`llff`]) and the
+//! Blender / NeRF-synthetic format ([`blender`]), loaded into one small [`Dataset`] type.
+//!
+//! # Conventions (see CONVENTIONS.md)
+//!
+//! * Poses are `world_from_camera` isometries (`world_from_camera * p_cam = p_world`).
+//! * Camera axes are OpenCV's: x right, y down, z forward (the viewing direction is `+z`). Each
+//!   reader converts its file's axes at the boundary and documents the conversion.
+//! * Intrinsics are a pinhole `K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]` in continuous pixel
+//!   coordinates (pixel `(x, y)` has its centre at `(x + 0.5, y + 0.5)`), so a principal point at
+//!   the image centre is `(W/2, H/2)`.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use crate::image::{Image, ImageError};
+
+pub mod blender;
+pub mod llff;
+
+/// Pinhole intrinsics shared by all images of a [`Dataset`] (see the module docs for the pixel
+/// convention): a camera point `(X, Y, Z)` projects to `(fx·X/Z + cx, fy·Y/Z + cy)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intrinsics {
+    /// Image width W in pixels.
+    pub width: usize,
+    /// Image height H in pixels.
+    pub height: usize,
+    /// Focal length along x, in pixels.
+    pub fx: f64,
+    /// Focal length along y, in pixels.
+    pub fy: f64,
+    /// Principal point x, in continuous pixel coordinates.
+    pub cx: f64,
+    /// Principal point y, in continuous pixel coordinates.
+    pub cy: f64,
+}
+
+/// Images with their poses and one shared camera. All vectors have one entry per image, in the
+/// reader's order; all images have the size `camera.width × camera.height`.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    /// The RGB images.
+    pub images: Vec<Image>,
+    /// `world_from_camera` per image, OpenCV camera axes.
+    pub world_from_camera: Vec<Isometry3<f64>>,
+    /// The shared pinhole camera.
+    pub camera: Intrinsics,
+    /// `[near, far]` scene depth bounds per image when the format has them (LLFF), else `None`.
+    pub bounds: Option<Vec<[f64; 2]>>,
+    /// The image file names (without folder), e.g. `image000.png` or `r_0.png`.
+    pub names: Vec<String>,
+}
+
+impl Dataset {
+    /// The number of images.
+    pub fn len(&self) -> usize {
+        self.images.len()
+    }
+
+    /// Whether there are no images.
+    pub fn is_empty(&self) -> bool {
+        self.images.is_empty()
+    }
+}
+
+/// Errors from the dataset readers; each names the file or folder at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// A file or folder could not be read.
+    #[error("cannot read {}: {error}", .path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The underlying error.
+        error: std::io::Error,
+    },
+    /// An image could not be loaded (the error names the file).
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    /// A file's content is not what the format requires.
+    #[error("{}: expected {expected}, got {found}", .path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What the reader expected.
+        expected: String,
+        /// What it found.
+        found: String,
+    },
+    /// An image's size differs from the first image's.
+    #[error("image {}: expected the size of the first image, {}×{}, got {}×{}",
+        .path.display(), .expected.0, .expected.1, .found.0, .found.1)]
+    ImageSize {
+        /// The image file.
+        path: PathBuf,
+        /// The first image's `(width, height)`.
+        expected: (usize, usize),
+        /// This image's `(width, height)`.
+        found: (usize, usize),
+    },
+}
+
+/// Loads `paths` with `load`, checking that all images have the size of the first one.
+/// Returns the images and their `(width, height)`; errors if `paths` is empty (naming `folder`).
+fn load_same_size(
+    paths: &[PathBuf],
+    folder: &Path,
+    load: impl Fn(&Path) -> Result<Image, ImageError>,
+) -> Result<(Vec<Image>, (usize, usize)), DataError> {
+    let mut images = Vec::with_capacity(paths.len());
+    let mut size = None;
+    for path in paths {
+        let image = load(path)?;
+        let found = (image.width(), image.height());
+        match size {
+            None => size = Some(found),
+            Some(expected) if expected != found => {
+                return Err(DataError::ImageSize {
+                    path: path.clone(),
+                    expected,
+                    found,
+                });
+            }
+            Some(_) => {}
+        }
+        images.push(image);
+    }
+    let size = size.ok_or_else(|| DataError::Format {
+        path: folder.to_path_buf(),
+        expected: "at least one image".to_owned(),
+        found: "none".to_owned(),
+    })?;
+    Ok((images, size))
+}
+
+/// The largest `|RᵀR − I|` entry and `|det R − 1|` accepted for a rotation read from a file
+/// (file values are rounded; COLMAP/Blender store near-orthonormal matrices).
+const ROTATION_TOLERANCE: f64 = 1e-4;
+
+/// The isometry `[R | t]` from a near-orthonormal rotation read from `path`; errors when `R` is
+/// not a rotation within [`ROTATION_TOLERANCE`] (or has non-finite entries). The quaternion of
+/// `R` (Shepperd's method) is normalised, which absorbs the file's rounding.
+fn isometry_from_rt(
+    rotation: Matrix3<f64>,
+    translation: Vector3<f64>,
+    path: &Path,
+    what: &str,
+) -> Result<Isometry3<f64>, DataError> {
+    let orth_err = (rotation.transpose() * rotation - Matrix3::identity()).amax();
+    let det_err = (rotation.determinant() - 1.0).abs();
+    let finite = rotation
+        .iter()
+        .chain(translation.iter())
+        .all(|v| v.is_finite());
+    if !(finite && orth_err < ROTATION_TOLERANCE && det_err < ROTATION_TOLERANCE) {
+        return Err(DataError::Format {
+            path: path.to_path_buf(),
+            expected: format!(
+                "{what}: a rotation (|RᵀR − I| and |det R − 1| below {ROTATION_TOLERANCE}) and a finite translation"
+            ),
+            found: format!(
+                "|RᵀR − I| = {orth_err:.3e}, det R = {:.6}, R = {rotation}, t = {translation}",
+                rotation.determinant()
+            ),
+        });
+    }
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rotation));
+    Ok(Isometry3::from_parts(
+        Translation3::from(translation),
+        UnitQuaternion::new_normalize(q.into_inner()),
+    ))
+}
