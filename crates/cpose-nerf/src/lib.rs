@@ -6,7 +6,9 @@
 
 pub use cpose_core;
 
+pub mod camera;
 pub mod field2d;
 pub mod image;
 pub mod planar;
+pub mod volume;
 pub mod warp2d;
