@@ -6,9 +6,11 @@
 
 pub use cpose_core;
 
+pub mod camera;
 pub mod data;
 pub mod field2d;
 pub mod image;
 pub mod metrics;
 pub mod planar;
+pub mod volume;
 pub mod warp2d;
