@@ -133,14 +133,7 @@ pub fn load_blender(
     Ok(Dataset {
         images,
         world_from_camera,
-        camera: Intrinsics {
-            width,
-            height,
-            fx: focal,
-            fy: focal,
-            cx: width as f64 / 2.0,
-            cy: height as f64 / 2.0,
-        },
+        camera: Intrinsics::centred(width, height, focal),
         bounds: None,
         names,
     })

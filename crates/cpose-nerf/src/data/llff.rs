@@ -114,14 +114,7 @@ pub fn load_llff(scene_dir: impl AsRef<Path>, factor: u32) -> Result<Dataset, Da
     Ok(Dataset {
         images,
         world_from_camera,
-        camera: Intrinsics {
-            width,
-            height,
-            fx: focal,
-            fy: focal,
-            cx: width as f64 / 2.0,
-            cy: height as f64 / 2.0,
-        },
+        camera: Intrinsics::centred(width, height, focal),
         bounds: Some(bounds),
         names,
     })

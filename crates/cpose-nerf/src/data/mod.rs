@@ -37,6 +37,21 @@ pub struct Intrinsics {
     pub cy: f64,
 }
 
+impl Intrinsics {
+    /// Square pixels of focal length `focal` and the principal point at the image centre
+    /// `(W/2, H/2)` (both readers' convention).
+    pub fn centred(width: usize, height: usize, focal: f64) -> Self {
+        Self {
+            width,
+            height,
+            fx: focal,
+            fy: focal,
+            cx: width as f64 / 2.0,
+            cy: height as f64 / 2.0,
+        }
+    }
+}
+
 /// Images with their poses and one shared camera. All vectors have one entry per image, in the
 /// reader's order; all images have the size `camera.width × camera.height`.
 #[derive(Clone, Debug)]
