@@ -43,18 +43,23 @@ pub struct PinholeCamera {
 }
 
 impl PinholeCamera {
-    /// Square pixels, principal point at the image centre, horizontal field of view `fov_x`
-    /// (radians): `f = ½ W / tan(½ fov_x)` (Blender's `camera_angle_x`).
-    pub fn from_fov_x(width: usize, height: usize, fov_x: f64) -> Self {
-        let f = 0.5 * width as f64 / (0.5 * fov_x).tan();
+    /// Square pixels of focal length `focal` and the principal point at the image centre
+    /// `(W/2, H/2)` (the LLFF and Blender readers' convention).
+    pub fn centred(width: usize, height: usize, focal: f64) -> Self {
         Self {
             width,
             height,
-            fx: f,
-            fy: f,
-            cx: 0.5 * width as f64,
-            cy: 0.5 * height as f64,
+            fx: focal,
+            fy: focal,
+            cx: width as f64 / 2.0,
+            cy: height as f64 / 2.0,
         }
+    }
+
+    /// Square pixels, principal point at the image centre, horizontal field of view `fov_x`
+    /// (radians): `f = ½ W / tan(½ fov_x)` (Blender's `camera_angle_x`).
+    pub fn from_fov_x(width: usize, height: usize, fov_x: f64) -> Self {
+        Self::centred(width, height, 0.5 * width as f64 / (0.5 * fov_x).tan())
     }
 
     /// The same camera at a resolution scaled by `factor`: `fx, fy, cx, cy` times `factor`,

@@ -24,7 +24,8 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
-use super::{DataError, Dataset, Intrinsics, isometry_from_rt, load_same_size};
+use super::{DataError, Dataset, isometry_from_rt, load_same_size};
+use crate::camera::PinholeCamera;
 use crate::image::Image;
 
 /// Options of [`load_blender`].
@@ -133,7 +134,7 @@ pub fn load_blender(
     Ok(Dataset {
         images,
         world_from_camera,
-        camera: Intrinsics::centred(width, height, focal),
+        camera: PinholeCamera::centred(width, height, focal),
         bounds: None,
         names,
     })

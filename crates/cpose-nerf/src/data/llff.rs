@@ -34,7 +34,8 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::{DataError, Dataset, Intrinsics, isometry_from_rt, load_same_size};
+use super::{DataError, Dataset, isometry_from_rt, load_same_size};
+use crate::camera::PinholeCamera;
 use crate::image::Image;
 
 /// `P` with `R_cv = R_llff · P` (see the module docs): LLFF (down, right, back) columns to
@@ -114,7 +115,7 @@ pub fn load_llff(scene_dir: impl AsRef<Path>, factor: u32) -> Result<Dataset, Da
     Ok(Dataset {
         images,
         world_from_camera,
-        camera: Intrinsics::centred(width, height, focal),
+        camera: PinholeCamera::centred(width, height, focal),
         bounds: Some(bounds),
         names,
     })

@@ -14,43 +14,11 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
+use crate::camera::PinholeCamera;
 use crate::image::{Image, ImageError};
 
 pub mod blender;
 pub mod llff;
-
-/// Pinhole intrinsics shared by all images of a [`Dataset`] (see the module docs for the pixel
-/// convention): a camera point `(X, Y, Z)` projects to `(fx·X/Z + cx, fy·Y/Z + cy)`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Intrinsics {
-    /// Image width W in pixels.
-    pub width: usize,
-    /// Image height H in pixels.
-    pub height: usize,
-    /// Focal length along x, in pixels.
-    pub fx: f64,
-    /// Focal length along y, in pixels.
-    pub fy: f64,
-    /// Principal point x, in continuous pixel coordinates.
-    pub cx: f64,
-    /// Principal point y, in continuous pixel coordinates.
-    pub cy: f64,
-}
-
-impl Intrinsics {
-    /// Square pixels of focal length `focal` and the principal point at the image centre
-    /// `(W/2, H/2)` (both readers' convention).
-    pub fn centred(width: usize, height: usize, focal: f64) -> Self {
-        Self {
-            width,
-            height,
-            fx: focal,
-            fy: focal,
-            cx: width as f64 / 2.0,
-            cy: height as f64 / 2.0,
-        }
-    }
-}
 
 /// Images with their poses and one shared camera. All vectors have one entry per image, in the
 /// reader's order; all images have the size `camera.width × camera.height`.
@@ -61,7 +29,7 @@ pub struct Dataset {
     /// `world_from_camera` per image, OpenCV camera axes.
     pub world_from_camera: Vec<Isometry3<f64>>,
     /// The shared pinhole camera.
-    pub camera: Intrinsics,
+    pub camera: PinholeCamera,
     /// `[near, far]` scene depth bounds per image when the format has them (LLFF), else `None`.
     pub bounds: Option<Vec<[f64; 2]>>,
     /// The image file names (without folder), e.g. `image000.png` or `r_0.png`.
