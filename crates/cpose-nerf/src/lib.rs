@@ -12,5 +12,6 @@ pub mod field2d;
 pub mod image;
 pub mod metrics;
 pub mod planar;
+pub mod scene;
 pub mod volume;
 pub mod warp2d;

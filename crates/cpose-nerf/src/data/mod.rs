@@ -46,6 +46,31 @@ impl Dataset {
     pub fn is_empty(&self) -> bool {
         self.images.is_empty()
     }
+
+    /// Images `0, every, 2·every, …` with their poses, bounds and names ([`subsample`]).
+    ///
+    /// # Panics
+    /// If `every` is 0.
+    pub fn subsampled(&self, every: usize) -> Dataset {
+        Dataset {
+            images: subsample(&self.images, every),
+            world_from_camera: subsample(&self.world_from_camera, every),
+            camera: self.camera,
+            bounds: self.bounds.as_ref().map(|b| subsample(b, every)),
+            names: subsample(&self.names, every),
+        }
+    }
+}
+
+/// Every `every`-th item starting with the first: items `0, every, 2·every, …`. The paper's
+/// "fern/2", "fern/4" (a faster camera, §4.1.2) are `subsample(frames, 2)`, `subsample(frames,
+/// 4)`.
+///
+/// # Panics
+/// If `every` is 0.
+pub fn subsample<T: Clone>(items: &[T], every: usize) -> Vec<T> {
+    assert!(every >= 1, "subsample: every must be ≥ 1");
+    items.iter().step_by(every).cloned().collect()
 }
 
 /// Errors from the dataset readers; each names the file or folder at fault.
@@ -154,4 +179,36 @@ fn isometry_from_rt(
         Translation3::from(translation),
         UnitQuaternion::new_normalize(q.into_inner()),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subsample_keeps_every_kth_from_the_first() {
+        let items: Vec<usize> = (0..10).collect();
+        assert_eq!(subsample(&items, 1), items);
+        assert_eq!(subsample(&items, 2), [0, 2, 4, 6, 8]);
+        assert_eq!(subsample(&items, 4), [0, 4, 8]);
+        assert_eq!(subsample(&items, 20), [0]);
+        assert!(subsample::<usize>(&[], 3).is_empty());
+        let data = Dataset {
+            images: (0..5)
+                .map(|i| Image::from_fn(2, 1, |_, _| [i as f32; 3]))
+                .collect(),
+            world_from_camera: (0..5)
+                .map(|i| Isometry3::translation(i as f64, 0.0, 0.0))
+                .collect(),
+            camera: PinholeCamera::centred(2, 1, 1.0),
+            bounds: Some((0..5).map(|i| [i as f64, 10.0]).collect()),
+            names: (0..5).map(|i| format!("{i}.png")).collect(),
+        };
+        let half = data.subsampled(2);
+        assert_eq!(half.len(), 3);
+        assert_eq!(half.names, ["0.png", "2.png", "4.png"]);
+        assert_eq!(half.images[2].pixel(0, 0), [4.0; 3]);
+        assert_eq!(half.world_from_camera[1].translation.vector.x, 2.0);
+        assert_eq!(half.bounds.unwrap()[2], [4.0, 10.0]);
+    }
 }
