@@ -187,6 +187,21 @@ impl PoseGradient {
         out
     }
 
+    /// `∂L/∂δ = (∂L/∂ω, ∂L/∂v)` for the right perturbation `world_from_camera · Exp(δ)` at
+    /// `δ = 0` (a correction in the camera frame, BARF's `compose([Exp(δ), P])` on
+    /// world-to-camera poses): `o' = t + R v`, `d' = R (d_cam + ω × d_cam)`, so
+    /// `∂L/∂v = Rᵀ G_o` and `∂L/∂ω = Σ d_cam × Rᵀ g_d = axial(Rᵀ M)`.
+    pub fn right_se3(&self, world_from_camera: &Isometry3<f64>) -> Vector6<f64> {
+        let rt = world_from_camera
+            .rotation
+            .to_rotation_matrix()
+            .into_inner()
+            .transpose();
+        let omega = axial(&(rt * self.moment));
+        let v = rt * self.sum_grad_origin;
+        Vector6::new(omega.x, omega.y, omega.z, v.x, v.y, v.z)
+    }
+
     /// `(∂L/∂q, ∂L/∂t)`: raw partials with respect to the components of `q` (w first) of
     /// `q ⊗ (0, d_cam) ⊗ q*`, and with respect to the translation — a `PoseBatch` cotangent.
     pub fn quaternion_translation(
@@ -296,6 +311,26 @@ mod tests {
             xi[k] = h;
             let lp = total_loss(&cam, &(se3_exp(&xi) * pose));
             let lm = total_loss(&cam, &(se3_exp(&(-xi)) * pose));
+            let fd = (lp - lm) / (2.0 * h);
+            assert!(
+                (fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "k={k}: fd {fd} vs {}",
+                g[k]
+            );
+        }
+    }
+
+    #[test]
+    fn right_se3_gradient_matches_central_differences() {
+        let cam = camera();
+        let pose = pose();
+        let g = accumulate(&cam, &pose).right_se3(&pose);
+        let h = 1e-6;
+        for k in 0..6 {
+            let mut xi = Vector6::zeros();
+            xi[k] = h;
+            let lp = total_loss(&cam, &(pose * se3_exp(&xi)));
+            let lm = total_loss(&cam, &(pose * se3_exp(&(-xi))));
             let fd = (lp - lm) / (2.0 * h);
             assert!(
                 (fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()),
