@@ -9,6 +9,8 @@ pub use cpose_core;
 pub mod camera;
 pub mod data;
 pub mod field2d;
+pub mod field3d;
+mod field_common;
 pub mod image;
 pub mod metrics;
 pub mod planar;
