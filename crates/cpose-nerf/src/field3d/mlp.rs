@@ -43,6 +43,8 @@ pub struct NerfMlpConfig {
     pub rgb_width: usize,
     /// Coarse-to-fine window `[start, end]` in fractions of training, `0 ≤ start < end ≤ 1`;
     /// `false` in TOML (`None`) keeps all bands at weight 1. Default `[0.1, 0.5]` (BARF NeRF).
+    /// Unlike the 2-D [`PeMlpConfig`](crate::field2d::PeMlpConfig), the first layer is not
+    /// rescaled (BARF's NeRF does not).
     #[serde(with = "c2f_serde")]
     pub c2f: Option<[f64; 2]>,
     /// Seed of the weight initialisation (ChaCha8: the trunk, then the colour head); default 0.

@@ -18,7 +18,7 @@
 //! [`SceneBounds`] places the scene: a point is normalised as `y = (x − c)/r` (centre `c`,
 //! radius `r`). A bounded scene uses `p = y`; the grid spans `[−1, 1]³` and points outside read
 //! the grid at the nearest border point (clamped per axis, zero derivative along a clamped
-//! axis). An unbounded scene (forward-facing LLFF captures sampled to infinite depth) uses
+//! axis), while the MLP encodes `p` as it is. An unbounded scene (forward-facing LLFF captures sampled to infinite depth) uses
 //! mip-NeRF 360's contraction (Barron et al. 2022, eq. 10), [`contract`]:
 //!
 //! `p = contract(y) = y` if `‖y‖ ≤ 1`, else `(2 − 1/‖y‖) · y/‖y‖`,
