@@ -218,8 +218,9 @@ impl HashGridConfig {
 /// level instead, each level over all points (rayon steals whole levels), so each thread
 /// scatters into its own level's slice of the gradient and no partial grid gradients are
 /// summed; each level's point gradient (`n × 3`) is kept apart and the levels are added in
-/// order. Corner indices and weights are recomputed in the reverse pass: caching them (48 B per
-/// point and level) measured no faster.
+/// order (as fast as one static group of levels per thread, and independent of the schedule).
+/// Corner indices and weights are recomputed in the reverse pass: caching them (48 B per point
+/// and level, 38 MB at 65,536 points) saved only ~3% of a step.
 #[derive(Clone, Debug)]
 pub struct HashGridField<S: Real = f32> {
     config: HashGridConfig,
