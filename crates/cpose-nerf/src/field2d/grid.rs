@@ -8,10 +8,8 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    Field2dError, ImageField, batch_len, c2f_serde, check_c2f, coarse_to_fine_weights, grow,
-    invalid, sigmoid_backward, sigmoid_forward,
-};
+use super::{Field2dError, ImageField, batch_len, sigmoid_backward, sigmoid_forward};
+use crate::field_common::{c2f_serde, check_c2f, coarse_to_fine_weights, grow, invalid};
 
 /// Largest accepted `finest_resolution`: a dense level holds `(R + 1)² · F` values.
 const MAX_RESOLUTION: usize = 4096;

@@ -4,10 +4,8 @@ use cpose_core::Real;
 use cpose_core::nn::{Accum, Activation, Embedding, Encoding, Init, Mlp, MlpSpec, MlpWorkspace};
 use serde::{Deserialize, Serialize};
 
-use super::{
-    Field2dError, ImageField, batch_len, c2f_serde, check_c2f, grow, invalid, sigmoid_backward,
-    sigmoid_forward,
-};
+use super::{Field2dError, ImageField, batch_len, sigmoid_backward, sigmoid_forward};
+use crate::field_common::{c2f_serde, check_c2f, grow, invalid};
 
 /// Most frequency bands accepted: band `k` has period `2^(1−k)`, at `k = 15` 1/32768 of the
 /// image side (far below a pixel), and the `f32` argument `2^k π x` has lost most digits.
