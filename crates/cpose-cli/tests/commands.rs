@@ -178,6 +178,7 @@ fn every_config_runs_as_a_smoke_test() {
         for (marker, key, relative) in [
             ("source = \"euroc\"", "data.path", "euroc/V1_02_excerpt"),
             ("planar/cat.jpg", "image.path", "planar/cat.jpg"),
+            ("source = \"llff\"", "data.path", "llff/fern"),
         ] {
             if !text.contains(marker) {
                 continue;
@@ -188,6 +189,24 @@ fn every_config_runs_as_a_smoke_test() {
             };
             args.push("--set".into());
             args.push(format!("{key}={}", data.join(relative).display()));
+        }
+        if text.contains("task = \"nerf\"") {
+            // Volume rendering in the test profile: a few small views and rays.
+            for set in [
+                "train.rays_per_step=64",
+                "render.samples=16",
+                "eval.refine_iterations=2",
+                "eval.refine_rays=64",
+                "data.test_views=2",
+                "eval.saved_views=1",
+            ] {
+                args.extend(["--set".into(), set.into()]);
+            }
+            if !text.contains("source = \"llff\"") {
+                for set in ["data.width=24", "data.height=24", "orbit.frames=12"] {
+                    args.extend(["--set".into(), set.into()]);
+                }
+            }
         }
         let out_dir = temp_dir("smoke").join("run");
         args.extend([

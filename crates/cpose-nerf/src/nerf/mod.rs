@@ -1,0 +1,898 @@
+//! Task `nerf`: NeRF from noisy or unknown camera poses (paper §4.1.2, its supplement's noise
+//! tables and the LLFF table; BARF's protocol, algorithms.md §2.3–2.6).
+//!
+//! A radiance field is trained from images whose poses are wrong, and the poses are refined
+//! jointly as a correction of the initial ones, `world_from_cam_i = init_i ∘ C(t_i)`
+//! ([`poses`]). The methods differ only in `C`: PoseNet on time (`posenet`), BARF's free se(3)
+//! per frame (`barf`), a cubic B-spline of control poses (`spline`), or no correction at all —
+//! `true_poses` trains with the ground truth (the reference for PSNR) and `fixed` with the
+//! initial poses. Everything else is shared: field, sampling, rays and seeds.
+//!
+//! Data (`[data] source`):
+//! - `synthetic` (default): the built-in textured scene rendered along the paper's monocular
+//!   orbit (a circle in the xy-plane, up and down in z at constant speed), 100 frames of
+//!   100×100, perturbed by time-correlated noise (`[noise]`); held-out views are rendered
+//!   half-way between training frames.
+//! - `llff`: a forward-facing scene (`poses_bounds.npy`, `images_N/`) normalised as BARF
+//!   (scaled so the nearest bound is 4/3, centred on the mean camera), the last 10% of the
+//!   images held out; `[noise] kind = "identity"` is the paper's unknown-pose start.
+//! - `blender`: a NeRF-synthetic scene (`transforms_train.json`); BARF's i.i.d. noise.
+//!
+//! Outputs: `metrics.json` (`{condition: {method: {rot_err_deg, trans_err, psnr_db, ssim, …}}}`),
+//! `traj_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`, `traj_init.txt` (TUM),
+//! `trajectory_<method>.png`, `view_<k>_<method>.png` (rendered | truth), `depth_<k>_<method>.png`,
+//! `checkpoint_<method>.bin`.
+
+pub mod eval;
+pub mod poses;
+pub mod render;
+pub mod train;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use cpose_core::eval::{Trajectory, barf_pose_errors, write_tum};
+use cpose_core::nn::ExponentialDecay;
+use cpose_core::registry::{Task, TaskInput};
+use cpose_core::{FieldContext, PoseField, PoseNetConfig, Section, TimeRange};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::PinholeCamera;
+use crate::data::{Dataset, blender, llff};
+use crate::field3d::{HashGridConfig, NerfMlpConfig, RadianceField, SceneBounds};
+use crate::image::Image;
+use crate::metrics::ssim;
+use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
+use crate::volume::Sampling;
+use eval::Refinement;
+use poses::{FramePoses, PoseSchedules};
+use render::{RenderSettings, Renderer, render_view};
+use train::{Schedule, Trainer};
+
+inventory::submit! {
+    Task {
+        name: "nerf",
+        about: "NeRF from noisy or unknown poses (paper §4.1.2): PoseNet vs BARF vs B-spline",
+        run,
+    }
+}
+
+/// The config file of the task.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Experiment {
+    #[serde(default)]
+    data: DataConfig,
+    #[serde(default)]
+    orbit: MonocularOrbit,
+    #[serde(default)]
+    render: RenderConfig,
+    #[serde(default)]
+    train: TrainConfig,
+    #[serde(default)]
+    eval: EvalConfig,
+    /// The pose noise, decoded by kind.
+    #[serde(rename = "noise")]
+    _noise: Option<serde::de::IgnoredAny>,
+    /// The radiance field, `kind = "grid"` or `"mlp"`.
+    #[serde(rename = "field")]
+    _field: Option<serde::de::IgnoredAny>,
+    /// PoseNet's settings ([`PoseNetConfig`]).
+    #[serde(rename = "posenet")]
+    _posenet: Option<serde::de::IgnoredAny>,
+}
+
+/// Where the images come from.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+enum Source {
+    /// The built-in scene along the monocular orbit.
+    #[default]
+    Synthetic,
+    /// An LLFF forward-facing scene.
+    Llff,
+    /// A NeRF-synthetic (Blender) scene.
+    Blender,
+}
+
+/// `[data]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct DataConfig {
+    source: Source,
+    /// Scene folder (llff, blender).
+    path: Option<PathBuf>,
+    /// LLFF downscale factor (`images_N`).
+    factor: u32,
+    /// Keep every k-th training frame (a faster camera).
+    subsample: usize,
+    /// Blender: at most this many frames.
+    max_frames: Option<usize>,
+    /// Synthetic: image size and horizontal field of view.
+    width: usize,
+    height: usize,
+    fov_x_deg: f64,
+    /// Synthetic: sub-pixel rays per side.
+    supersample: usize,
+    /// Synthetic and Blender: held-out views.
+    test_views: usize,
+}
+
+impl Default for DataConfig {
+    fn default() -> Self {
+        Self {
+            source: Source::Synthetic,
+            path: None,
+            factor: 8,
+            subsample: 1,
+            max_frames: None,
+            width: 100,
+            height: 100,
+            fov_x_deg: 40.0,
+            supersample: 2,
+            test_views: 10,
+        }
+    }
+}
+
+/// `[render]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RenderConfig {
+    samples: usize,
+    /// Depth range; synthetic default `[2, 6]` (orbit radius 4), LLFF `[1, inf]` in disparity.
+    near: Option<f64>,
+    far: Option<f64>,
+    /// `"metric"` or `"inverse"` (LLFF default).
+    sampling: Option<String>,
+    /// Background colour (white for object scenes; none for LLFF).
+    background: Option<[f32; 3]>,
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        Self {
+            samples: 64,
+            near: None,
+            far: None,
+            sampling: None,
+            background: None,
+        }
+    }
+}
+
+/// A pose model, named as in `metrics.json`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
+#[serde(rename_all = "snake_case")]
+enum Method {
+    Posenet,
+    Barf,
+    Spline,
+    TruePoses,
+    Fixed,
+}
+
+impl Method {
+    fn key(self) -> &'static str {
+        match self {
+            Self::Posenet => "posenet",
+            Self::Barf => "barf",
+            Self::Spline => "spline",
+            Self::TruePoses => "true_poses",
+            Self::Fixed => "fixed",
+        }
+    }
+}
+
+/// `[train]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct TrainConfig {
+    methods: Vec<Method>,
+    iterations: usize,
+    rays_per_step: usize,
+    /// `[start, end]` learning rate per field parameter group (`grid`, `mlp`).
+    lr_field: BTreeMap<String, [f64; 2]>,
+    /// PoseNet: `[start, end]` for the translation and rotation networks.
+    posenet_lr_translation: [f64; 2],
+    posenet_lr_rotation: [f64; 2],
+    /// BARF and spline: `[start, end]` for their se(3) parameters.
+    lr_pose: [f64; 2],
+    /// Spline: frames per control pose.
+    spline_frames_per_control: f64,
+    /// Checkpoint every this many steps (0: never).
+    checkpoint_every: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            methods: vec![Method::Posenet, Method::Barf, Method::TruePoses],
+            iterations: 6000,
+            rays_per_step: 1024,
+            lr_field: BTreeMap::from([
+                ("grid".to_owned(), [1e-2, 1e-3]),
+                ("mlp".to_owned(), [1e-3, 1e-4]),
+            ]),
+            posenet_lr_translation: [1e-3, 1e-5],
+            posenet_lr_rotation: [2e-4, 1e-6],
+            lr_pose: [1e-3, 1e-5],
+            spline_frames_per_control: 5.0,
+            checkpoint_every: 1000,
+        }
+    }
+}
+
+/// `[eval]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct EvalConfig {
+    /// Test-time photometric refinement steps (0: off).
+    refine_iterations: usize,
+    refine_rays: usize,
+    /// Views saved as PNG (the first ones).
+    saved_views: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            refine_iterations: 100,
+            refine_rays: 1024,
+            saved_views: 3,
+        }
+    }
+}
+
+/// The radiance field chosen by `[field] kind`.
+#[derive(Clone, Debug)]
+enum FieldChoice {
+    Grid(HashGridConfig),
+    Mlp(NerfMlpConfig),
+}
+
+impl FieldChoice {
+    fn from_section(section: &Section<'_>) -> anyhow::Result<Self> {
+        if !section.exists()? {
+            return Ok(Self::Grid(HashGridConfig::default()));
+        }
+        let (kind, at) = section.kind()?;
+        Ok(match kind.as_str() {
+            "grid" => Self::Grid(section.decode_params()?),
+            "mlp" => Self::Mlp(section.decode_params()?),
+            other => {
+                return Err(section
+                    .config()
+                    .error_at(
+                        Some(at),
+                        format!("unknown radiance field kind {other:?}; known kinds: grid, mlp"),
+                    )
+                    .into());
+            }
+        })
+    }
+
+    fn init(&self, seed: u64, bounds: SceneBounds) -> anyhow::Result<Box<dyn RadianceField>> {
+        Ok(match self {
+            Self::Grid(c) => {
+                let mut c = c.clone();
+                c.seed = c.seed.wrapping_add(seed);
+                Box::new(c.init::<f32>(bounds)?)
+            }
+            Self::Mlp(c) => {
+                let mut c = c.clone();
+                c.seed = c.seed.wrapping_add(seed);
+                Box::new(c.init::<f32>(bounds)?)
+            }
+        })
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            Self::Grid(_) => "grid",
+            Self::Mlp(_) => "mlp",
+        }
+    }
+}
+
+/// Training and test views with their true poses, and how to render the scene.
+struct Views {
+    /// What the data is called in `metrics.json`.
+    condition: String,
+    camera: PinholeCamera,
+    train_images: Vec<Image>,
+    train_times: Vec<f64>,
+    train_truth: Vec<Isometry3<f64>>,
+    test_images: Vec<Image>,
+    test_truth: Vec<Isometry3<f64>>,
+    settings: RenderSettings,
+    bounds: SceneBounds,
+    /// Size of the camera path (the orbit diameter; the spread of LLFF cameras), for noise.
+    diameter: f64,
+}
+
+fn resolve_settings(
+    render: &RenderConfig,
+    default: (Sampling, Option<[f32; 3]>),
+) -> anyhow::Result<RenderSettings> {
+    let (default_sampling, default_bg) = default;
+    let (dn, df) = match default_sampling {
+        Sampling::Metric { near, far } | Sampling::InverseDepth { near, far } => (near, far),
+    };
+    let (near, far) = (render.near.unwrap_or(dn), render.far.unwrap_or(df));
+    if !(near > 0.0 && far > near) {
+        bail!("[render]: need 0 < near < far, got near = {near}, far = {far}");
+    }
+    let sampling = match render.sampling.as_deref() {
+        None => match default_sampling {
+            Sampling::Metric { .. } => Sampling::Metric { near, far },
+            Sampling::InverseDepth { .. } => Sampling::InverseDepth { near, far },
+        },
+        Some("metric") if far.is_finite() => Sampling::Metric { near, far },
+        Some("inverse") => Sampling::InverseDepth { near, far },
+        Some(other) => bail!(
+            "[render] sampling: expected \"metric\" (finite far) or \"inverse\", got {other:?}"
+        ),
+    };
+    if render.samples == 0 {
+        bail!("[render] samples: expected at least 1");
+    }
+    Ok(RenderSettings {
+        samples: render.samples,
+        sampling,
+        background: render.background.or(default_bg),
+    })
+}
+
+fn subsample<T: Clone>(items: &[T], every: usize) -> Vec<T> {
+    items.iter().step_by(every.max(1)).cloned().collect()
+}
+
+fn synthetic_views(exp: &Experiment) -> anyhow::Result<Views> {
+    let d = &exp.data;
+    if d.width == 0 || d.height == 0 || !(d.fov_x_deg > 0.0 && d.fov_x_deg < 180.0) {
+        bail!("[data]: need width, height ≥ 1 and 0 < fov_x_deg < 180");
+    }
+    exp.orbit.validate()?;
+    let camera = PinholeCamera::from_fov_x(d.width, d.height, d.fov_x_deg.to_radians());
+    let scene = SyntheticScene::object_centric();
+    let times = exp.orbit.frame_times();
+    let frames = subsample(&times, d.subsample);
+    let render = |t: &f64| {
+        let pose = exp.orbit.world_from_camera(*t);
+        (
+            scene.render(&camera, &pose, d.supersample.max(1)).image,
+            pose,
+        )
+    };
+    let (train_images, train_truth): (Vec<_>, Vec<_>) = frames.iter().map(render).unzip();
+    // Held-out views half-way between training frames of the full sequence.
+    let n = times.len();
+    let test_times: Vec<f64> = (0..d.test_views)
+        .map(|k| times[((2 * k + 1) * (n - 1)) / (2 * d.test_views.max(1))] + 0.5)
+        .collect();
+    let (test_images, test_truth) = test_times.iter().map(render).unzip();
+    let radius = scene.bounding_radius();
+    let settings = resolve_settings(
+        &exp.render,
+        (
+            Sampling::Metric {
+                near: 2.0,
+                far: 6.0,
+            },
+            Some([1.0; 3]),
+        ),
+    )?;
+    Ok(Views {
+        condition: "synthetic".to_owned(),
+        camera,
+        train_images,
+        train_times: frames,
+        train_truth,
+        test_images,
+        test_truth,
+        settings,
+        bounds: SceneBounds {
+            centre: [0.0; 3],
+            radius,
+            unbounded: false,
+        },
+        diameter: exp.orbit.diameter(),
+    })
+}
+
+/// BARF's LLFF normalisation: scale so that the smallest near bound becomes `1/0.75`, then
+/// express every pose relative to the mean camera (mean centre; rotation from the mean
+/// viewing and up axes, orthonormalised).
+fn normalise_llff(dataset: &mut Dataset) -> anyhow::Result<()> {
+    let Some(bounds) = &dataset.bounds else {
+        bail!("LLFF data without depth bounds");
+    };
+    let near = bounds.iter().map(|b| b[0]).fold(f64::INFINITY, f64::min);
+    if !(near > 0.0 && near.is_finite()) {
+        bail!("LLFF near bounds must be positive, got {near}");
+    }
+    let scale = 1.0 / (0.75 * near);
+    let n = dataset.len() as f64;
+    let mut centre = Vector3::zeros();
+    let (mut z, mut y) = (Vector3::zeros(), Vector3::zeros());
+    for p in &mut dataset.world_from_camera {
+        p.translation.vector *= scale;
+        centre += p.translation.vector / n;
+        z += p.rotation * Vector3::z();
+        y += p.rotation * Vector3::y();
+    }
+    let z = z.normalize();
+    let x = y.cross(&z).normalize();
+    let y = z.cross(&x);
+    let mean = Isometry3::from_parts(
+        Translation3::from(centre),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+            Matrix3::from_columns(&[x, y, z]),
+        )),
+    );
+    let inv = mean.inverse();
+    for p in &mut dataset.world_from_camera {
+        *p = inv * *p;
+    }
+    Ok(())
+}
+
+fn dataset_views(exp: &Experiment) -> anyhow::Result<Views> {
+    let d = &exp.data;
+    let Some(path) = &d.path else {
+        bail!(
+            "[data] path: the {} scene folder is required for source = {:?}",
+            if d.source == Source::Llff {
+                "LLFF"
+            } else {
+                "Blender"
+            },
+            d.source
+        );
+    };
+    let (mut dataset, settings_default, unbounded) = match d.source {
+        Source::Llff => (
+            llff::load_llff(path, d.factor)?,
+            (
+                Sampling::InverseDepth {
+                    near: 1.0,
+                    far: f64::INFINITY,
+                },
+                None,
+            ),
+            true,
+        ),
+        _ => {
+            let options = blender::BlenderOptions {
+                max_frames: d.max_frames,
+                only_existing_images: true,
+                ..Default::default()
+            };
+            (
+                blender::load_blender(path, &options)?,
+                (
+                    Sampling::Metric {
+                        near: 2.0,
+                        far: 6.0,
+                    },
+                    Some([1.0; 3]),
+                ),
+                false,
+            )
+        }
+    };
+    if dataset.len() < 3 {
+        bail!(
+            "{}: need at least 3 images, found {}",
+            path.display(),
+            dataset.len()
+        );
+    }
+    if d.source == Source::Llff {
+        normalise_llff(&mut dataset)?;
+    }
+    let n = dataset.len();
+    // BARF: the last 10% (at least one) held out.
+    let held_out = if d.source == Source::Llff {
+        (n / 10).max(1)
+    } else {
+        d.test_views.min(n / 5).max(1)
+    };
+    let split = n - held_out;
+    let times: Vec<f64> = (0..split).map(|i| i as f64).collect();
+    let keep: Vec<usize> = (0..split).step_by(d.subsample.max(1)).collect();
+    let centres: Vec<Vector3<f64>> = dataset
+        .world_from_camera
+        .iter()
+        .map(|p| p.translation.vector)
+        .collect();
+    let mean = centres.iter().sum::<Vector3<f64>>() / n as f64;
+    let spread = centres
+        .iter()
+        .map(|c| (c - mean).norm())
+        .fold(0.0, f64::max);
+    let condition = format!(
+        "{}{}",
+        path.file_name()
+            .map_or("scene".into(), |s| s.to_string_lossy()),
+        if d.subsample > 1 {
+            format!("/{}", d.subsample)
+        } else {
+            String::new()
+        }
+    );
+    Ok(Views {
+        condition,
+        camera: dataset.camera,
+        train_images: keep.iter().map(|&i| dataset.images[i].clone()).collect(),
+        train_times: keep.iter().map(|&i| times[i]).collect(),
+        train_truth: keep.iter().map(|&i| dataset.world_from_camera[i]).collect(),
+        test_images: dataset.images[split..].to_vec(),
+        test_truth: dataset.world_from_camera[split..].to_vec(),
+        settings: resolve_settings(&exp.render, settings_default)?,
+        bounds: if unbounded {
+            SceneBounds {
+                centre: [0.0, 0.0, 2.0],
+                radius: 2.0,
+                unbounded: true,
+            }
+        } else {
+            SceneBounds {
+                centre: [0.0; 3],
+                radius: 1.5,
+                unbounded: false,
+            }
+        },
+        diameter: 2.0 * spread.max(1e-9),
+    })
+}
+
+/// One method's results, as in `metrics.json`.
+#[derive(Debug, Serialize)]
+struct MethodResult {
+    /// Mean rotation error after Procrustes alignment, degrees.
+    rot_err_deg: f64,
+    /// Mean translation error after alignment, scene units.
+    trans_err: f64,
+    /// The same errors of the initial poses (none when they all coincide: unknown poses).
+    init_rot_err_deg: Option<f64>,
+    init_trans_err: Option<f64>,
+    /// Held-out views rendered from the aligned true poses.
+    psnr_db: f64,
+    ssim: f64,
+    /// With test-time photometric refinement of each test pose.
+    psnr_db_refined: Option<f64>,
+    ssim_refined: Option<f64>,
+    /// Mean squared error of the last 100 training steps.
+    final_loss: f64,
+    iterations: usize,
+    wall_s: f64,
+}
+
+fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
+    ExponentialDecay {
+        lr0: lr[0],
+        lr_end: lr[1],
+        max_iter: iterations as u64,
+    }
+}
+
+fn correction(
+    method: Method,
+    input: &TaskInput,
+    views: &Views,
+    train: &TrainConfig,
+    seed: u64,
+) -> anyhow::Result<Option<Box<dyn PoseField>>> {
+    let times = &views.train_times;
+    let range = TimeRange::new(times[0], times[times.len() - 1])
+        .context("need at least two training frames at distinct times")?;
+    Ok(match method {
+        Method::TruePoses | Method::Fixed => None,
+        Method::Posenet => {
+            let section = input.config.section("posenet");
+            let mut config: PoseNetConfig = if section.exists()? {
+                section.decode_params()?
+            } else {
+                PoseNetConfig::default()
+            };
+            config.seed = config.seed.wrapping_add(seed);
+            Some(Box::new(config.init::<f32>(range)?))
+        }
+        Method::Barf => Some(Box::new(cpose_core::DiscretePoses::<f32>::new(times)?)),
+        Method::Spline => {
+            let span = times.len() as f64 / train.spline_frames_per_control.max(1e-9);
+            let config = cpose_core::SplineConfig {
+                kind: cpose_core::SplineKind::Lie,
+                control_points: (span.round() as usize).max(4),
+                knot_spacing_secs: None,
+            };
+            let ctx = FieldContext {
+                time_range: range,
+                frame_times_secs: times.clone(),
+                seed,
+            };
+            Some(Box::new(
+                config.init::<f32>(ctx.time_range, &ctx.frame_times_secs)?,
+            ))
+        }
+    })
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let exp: Experiment = input.config.parse_params()?;
+    let noise_section = input.config.section("noise");
+    let field_choice = FieldChoice::from_section(&input.config.section("field"))?;
+    let views = match exp.data.source {
+        Source::Synthetic => synthetic_views(&exp)?,
+        _ => dataset_views(&exp)?,
+    };
+    let noise: PoseNoise = if noise_section.exists()? {
+        noise_section.decode()?
+    } else if exp.data.source == Source::Llff {
+        PoseNoise::Identity {}
+    } else {
+        PoseNoise::default()
+    };
+    noise.validate()?;
+    let initial = noise.apply(&views.train_truth, views.diameter);
+    let seed = input.run.seed;
+    let iterations = input.run.iterations(exp.train.iterations);
+    let train = &exp.train;
+    input.run_dir.log(format_args!(
+        "{}: {} training views of {}×{}, {} held out; field {}; noise {:?}; {} steps of {} rays × {} samples; methods {:?}",
+        views.condition,
+        views.train_images.len(),
+        views.camera.width,
+        views.camera.height,
+        views.test_images.len(),
+        field_choice.name(),
+        noise,
+        iterations,
+        train.rays_per_step,
+        views.settings.samples,
+        train.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
+    ));
+    write_trajectory(input, "traj_gt.txt", &views.train_times, &views.train_truth)?;
+    write_trajectory(input, "traj_init.txt", &views.train_times, &initial)?;
+
+    let mut results = BTreeMap::new();
+    for &method in &train.methods {
+        let started = Instant::now();
+        let mut field = field_choice.init(seed, views.bounds)?;
+        let init = if method == Method::TruePoses {
+            views.train_truth.clone()
+        } else {
+            initial.clone()
+        };
+        let schedules = PoseSchedules {
+            rotation: decay(train.posenet_lr_rotation, iterations),
+            translation: decay(train.posenet_lr_translation, iterations),
+            pose: decay(train.lr_pose, iterations),
+        };
+        let mut poses = FramePoses::new(
+            init,
+            views.train_times.clone(),
+            correction(method, input, &views, train, seed)?,
+            schedules,
+        );
+        let schedule = Schedule {
+            iterations: iterations as u64,
+            rays_per_step: train.rays_per_step,
+            field_lr: train.lr_field.clone(),
+            seed,
+        };
+        let progress = input.progress(iterations as u64, method.key());
+        let checkpoint = input
+            .run_dir
+            .file(format!("checkpoint_{}.bin", method.key()));
+        let mut recent = Vec::with_capacity(100);
+        {
+            let mut trainer = Trainer::new(
+                field.as_mut(),
+                &mut poses,
+                &views.train_images,
+                views.camera,
+                views.settings,
+                schedule,
+            )?;
+            for it in 0..iterations {
+                let loss = trainer.step(it as u64).with_context(|| {
+                    format!(
+                        "method {}: training stopped; the last good checkpoint is {}",
+                        method.key(),
+                        checkpoint.display()
+                    )
+                })?;
+                if recent.len() == 100 {
+                    recent.remove(0);
+                }
+                recent.push(loss);
+                if train.checkpoint_every > 0 && (it + 1) % train.checkpoint_every == 0 {
+                    trainer.save_checkpoint(&checkpoint, it as u64 + 1)?;
+                }
+                progress.inc(1);
+            }
+        }
+        progress.finish();
+        let wall_s = started.elapsed().as_secs_f64();
+        let result = evaluate(
+            input,
+            &exp,
+            &views,
+            method,
+            field.as_mut(),
+            &poses,
+            recent.iter().sum::<f64>() / recent.len().max(1) as f64,
+            iterations,
+            wall_s,
+            seed,
+        )?;
+        input.run_dir.log(format_args!(
+            "{}: rotation {:.3}°, translation {:.4}, PSNR {:.2} dB (refined {}), SSIM {:.3}, {:.0} s",
+            method.key(),
+            result.rot_err_deg,
+            result.trans_err,
+            result.psnr_db,
+            result
+                .psnr_db_refined
+                .map_or("-".to_owned(), |p| format!("{p:.2} dB")),
+            result.ssim,
+            result.wall_s
+        ));
+        results.insert(method.key(), result);
+        // Write as we go so a long sweep keeps what is done.
+        let metrics = BTreeMap::from([(views.condition.clone(), &results)]);
+        input.run_dir.write_json("metrics.json", &metrics)?;
+    }
+    Ok(())
+}
+
+fn write_trajectory(
+    input: &TaskInput,
+    name: &str,
+    times: &[f64],
+    poses: &[Isometry3<f64>],
+) -> anyhow::Result<()> {
+    let trajectory = Trajectory::new(times.to_vec(), poses.to_vec())?;
+    write_tum(input.run_dir.file(name), &trajectory)?;
+    Ok(())
+}
+
+fn evaluate(
+    input: &TaskInput,
+    exp: &Experiment,
+    views: &Views,
+    method: Method,
+    field: &mut dyn RadianceField,
+    poses: &FramePoses,
+    final_loss: f64,
+    iterations: usize,
+    wall_s: f64,
+    seed: u64,
+) -> anyhow::Result<MethodResult> {
+    let estimate = poses.current();
+    let errors = barf_pose_errors(&views.train_truth, estimate)?;
+    let init_errors = barf_pose_errors(&views.train_truth, poses.initial()).ok();
+    let aligned: Vec<_> = estimate
+        .iter()
+        .map(|p| errors.alignment.align_pose(p))
+        .collect();
+    let init_aligned: Vec<_> = match &init_errors {
+        Some(e) => poses
+            .initial()
+            .iter()
+            .map(|p| e.alignment.align_pose(p))
+            .collect(),
+        None => Vec::new(),
+    };
+    write_trajectory(
+        input,
+        &format!("traj_{}.txt", method.key()),
+        &views.train_times,
+        &aligned,
+    )?;
+    eval::trajectory_plot(480, &views.train_truth, &init_aligned, &aligned).save_png(
+        input
+            .run_dir
+            .file(format!("trajectory_{}.png", method.key())),
+    )?;
+
+    let mut renderer = Renderer::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7e57);
+    let refinement = Refinement {
+        iterations: exp.eval.refine_iterations,
+        rays: exp.eval.refine_rays,
+        lr: exp.train.lr_pose[0],
+    };
+    let (mut psnr, mut ssim_sum, mut psnr_ref, mut ssim_ref) = (0.0, 0.0, 0.0, 0.0);
+    let (near, far) = match views.settings.sampling {
+        Sampling::Metric { near, far } => (near, far),
+        Sampling::InverseDepth { near, .. } => (near, 10.0 * near),
+    };
+    for (k, (image, truth)) in views.test_images.iter().zip(&views.test_truth).enumerate() {
+        let pose = errors.alignment.gt_to_learned(truth);
+        let view = render_view(
+            &mut renderer,
+            field,
+            &views.settings,
+            &views.camera,
+            &pose,
+            4096,
+        );
+        psnr += crate::image::psnr(view.image.data(), image.data());
+        ssim_sum += ssim(&view.image, image);
+        if k < exp.eval.saved_views {
+            side_by_side(&view.image, image)
+                .save_png(input.run_dir.file(format!("view_{k}_{}.png", method.key())))?;
+            eval::depth_image(
+                views.camera.width,
+                views.camera.height,
+                &view.depth,
+                &view.opacity,
+                near,
+                far,
+            )
+            .save_png(
+                input
+                    .run_dir
+                    .file(format!("depth_{k}_{}.png", method.key())),
+            )?;
+        }
+        if refinement.iterations > 0 {
+            let refined = eval::refine_pose(
+                &mut renderer,
+                field,
+                &views.settings,
+                &views.camera,
+                image,
+                &pose,
+                &refinement,
+                &mut rng,
+            );
+            let view = render_view(
+                &mut renderer,
+                field,
+                &views.settings,
+                &views.camera,
+                &refined,
+                4096,
+            );
+            psnr_ref += crate::image::psnr(view.image.data(), image.data());
+            ssim_ref += ssim(&view.image, image);
+        }
+    }
+    let n = views.test_images.len().max(1) as f64;
+    let refined = refinement.iterations > 0;
+    Ok(MethodResult {
+        rot_err_deg: errors.rot_err_deg,
+        trans_err: errors.trans_err,
+        init_rot_err_deg: init_errors.as_ref().map(|e| e.rot_err_deg),
+        init_trans_err: init_errors.as_ref().map(|e| e.trans_err),
+        psnr_db: psnr / n,
+        ssim: ssim_sum / n,
+        psnr_db_refined: refined.then_some(psnr_ref / n),
+        ssim_refined: refined.then_some(ssim_ref / n),
+        final_loss,
+        iterations,
+        wall_s,
+    })
+}
+
+/// `a | b` side by side.
+fn side_by_side(a: &Image, b: &Image) -> Image {
+    let (w, h) = (a.width(), a.height());
+    Image::from_fn(2 * w, h, |x, y| {
+        if x < w {
+            a.pixel(x, y)
+        } else {
+            b.pixel(x - w, y)
+        }
+    })
+}

@@ -1,0 +1,221 @@
+//! The camera poses of the training frames as a correction of their initial poses in world
+//! coordinates: `world_from_cam_i = C(t_i) ∘ init_i`. This is the paper's supplement
+//! (`T_{c',w} = T_init ∘ T_refine` on camera-from-world poses, `C = T_refine⁻¹`) and BARF's
+//! `compose([Exp(δξ_i), P⁰_i])`, where `compose([a, b])` applies `a` first, to world points. The
+//! initial noise acts the same way ([`crate::scene::PoseNoise`]), so a correction can undo it
+//! exactly. The correction `C` is any [`PoseField`] that starts at the identity — PoseNet on
+//! time, BARF's free se(3) per frame, a B-spline — or none (poses held fixed, e.g. at the truth
+//! for the reference run).
+//!
+//! # Gradient
+//!
+//! With `init = (q₀, t₀)` and `C = (q_c, t_c)`: `q = q_c ⊗ q₀`, `t = R(q_c) t₀ + t_c`. Right
+//! multiplication by the unit `q₀` is an orthogonal map of R⁴, so the first term of `∂L/∂q_c`
+//! is `∂L/∂q ⊗ q₀*`; the second is the quaternion gradient of `R(q_c) t₀` for the cotangent
+//! `∂L/∂t` (the homogeneous rotation of [`PoseGradient`], one "ray" of direction `t₀`); and
+//! `∂L/∂t_c = ∂L/∂t`.
+
+use cpose_core::nn::{Adam, ExponentialDecay};
+use cpose_core::{Order, ParamKind, PoseBatch, PoseField};
+use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
+
+use crate::camera::PoseGradient;
+
+/// Learning-rate schedules of a correction, by parameter kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseSchedules {
+    /// Rotation parameters (PoseNet's rotation network).
+    pub rotation: ExponentialDecay,
+    /// Translation parameters (PoseNet's translation network).
+    pub translation: ExponentialDecay,
+    /// Parameters that move both (per-frame se(3), spline control poses).
+    pub pose: ExponentialDecay,
+}
+
+/// Per-frame poses `init_i ∘ C(t_i)` and their optimiser.
+pub struct FramePoses {
+    init: Vec<Isometry3<f64>>,
+    times: Vec<f64>,
+    correction: Option<Box<dyn PoseField>>,
+    schedules: PoseSchedules,
+    adam: Adam<f32>,
+    batch: PoseBatch,
+    cotangent: PoseBatch,
+    grad: Vec<f32>,
+    current: Vec<Isometry3<f64>>,
+}
+
+impl FramePoses {
+    /// Poses `init_i ∘ correction(t_i)`; `correction = None` keeps `init`.
+    pub fn new(
+        init: Vec<Isometry3<f64>>,
+        times: Vec<f64>,
+        correction: Option<Box<dyn PoseField>>,
+        schedules: PoseSchedules,
+    ) -> Self {
+        assert_eq!(init.len(), times.len(), "one initial pose per frame time");
+        let n = correction.as_ref().map_or(0, |c| c.num_params());
+        Self {
+            current: init.clone(),
+            init,
+            times,
+            correction,
+            schedules,
+            adam: Adam::new(n),
+            batch: PoseBatch::default(),
+            cotangent: PoseBatch::default(),
+            grad: vec![0.0; n],
+        }
+    }
+
+    /// Whether the poses are optimised.
+    pub fn is_trainable(&self) -> bool {
+        self.correction.is_some()
+    }
+
+    /// The frame times.
+    pub fn times(&self) -> &[f64] {
+        &self.times
+    }
+
+    /// Evaluates the correction at `progress` (its coarse-to-fine schedule) and returns the
+    /// current `world_from_cam` of every frame.
+    pub fn update(&mut self, progress: f64) -> anyhow::Result<&[Isometry3<f64>]> {
+        if let Some(c) = self.correction.as_mut() {
+            c.set_progress(progress);
+            c.forward(&self.times, Order::Pose, &mut self.batch)?;
+            for (i, (pose, init)) in self.current.iter_mut().zip(&self.init).enumerate() {
+                *pose = self.batch.world_from_body(i) * init;
+            }
+        }
+        Ok(&self.current)
+    }
+
+    /// The poses of the last [`FramePoses::update`].
+    pub fn current(&self) -> &[Isometry3<f64>] {
+        &self.current
+    }
+
+    /// The initial poses.
+    pub fn initial(&self) -> &[Isometry3<f64>] {
+        &self.init
+    }
+
+    /// One optimiser step at iteration `it` from `∂L/∂q` (raw, w first) and `∂L/∂t` of every
+    /// frame's `world_from_cam` as returned by the last [`FramePoses::update`].
+    pub fn step(
+        &mut self,
+        grads: &[(Quaternion<f64>, Vector3<f64>)],
+        it: u64,
+    ) -> anyhow::Result<()> {
+        let Some(c) = self.correction.as_mut() else {
+            return Ok(());
+        };
+        let n = self.times.len();
+        assert_eq!(grads.len(), n, "one pose gradient per frame");
+        self.cotangent.reset(n, Order::Pose);
+        for (i, ((gq, gt), init)) in grads.iter().zip(&self.init).enumerate() {
+            let q_c = UnitQuaternion::new_normalize(self.batch.rotation[i]);
+            (self.cotangent.rotation[i], self.cotangent.translation[i]) =
+                correction_cotangent(init, &q_c, gq, gt);
+        }
+        self.grad.fill(0.0);
+        c.backward(&self.times, &self.cotangent, &mut self.grad)?;
+        let s = self.schedules;
+        self.adam
+            .step_pose_field(c.as_mut(), &self.grad, |kind| match kind {
+                ParamKind::Rotation => s.rotation.lr(it),
+                ParamKind::Translation => s.translation.lr(it),
+                ParamKind::Pose => s.pose.lr(it),
+            });
+        Ok(())
+    }
+
+    /// The correction's parameters, flat (for checkpoints).
+    pub fn params(&self) -> Vec<f32> {
+        self.correction
+            .as_deref()
+            .map(cpose_core::pose_field::params_to_vec)
+            .unwrap_or_default()
+    }
+}
+
+/// `(∂L/∂q_c, ∂L/∂t_c)` of the correction `C = (q_c, t_c)` in `C ∘ init` from `(∂L/∂q, ∂L/∂t)`
+/// of the composed pose (module docs).
+pub fn correction_cotangent(
+    init: &Isometry3<f64>,
+    q_c: &UnitQuaternion<f64>,
+    grad_q: &Quaternion<f64>,
+    grad_t: &Vector3<f64>,
+) -> (Quaternion<f64>, Vector3<f64>) {
+    let mut lever = PoseGradient::new();
+    lever.add_ray(init.translation.vector.into(), [0.0; 3], (*grad_t).into());
+    let (g_rot, _) = lever.quaternion_translation(q_c);
+    (
+        grad_q * init.rotation.conjugate().into_inner() + g_rot,
+        *grad_t,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Translation3, UnitQuaternion, Vector4};
+
+    use super::*;
+
+    /// A smooth function of a raw quaternion and a translation.
+    fn loss(q: &Quaternion<f64>, t: &Vector3<f64>) -> f64 {
+        let a = Vector4::new(0.3, -1.2, 0.7, 0.4);
+        (q.coords.dot(&a)).sin() + q.coords.norm_squared() * t.x + t.y * t.z - 0.5 * t.x
+    }
+
+    fn grad(q: &Quaternion<f64>, t: &Vector3<f64>) -> (Quaternion<f64>, Vector3<f64>) {
+        let a = Vector4::new(0.3, -1.2, 0.7, 0.4);
+        let gq = a * q.coords.dot(&a).cos() + q.coords * (2.0 * t.x);
+        let gt = Vector3::new(q.coords.norm_squared() - 0.5, t.z, t.y);
+        (Quaternion::from(gq), gt)
+    }
+
+    /// The loss of `(q_c, t_c) ∘ init` with the composition written on raw quaternions,
+    /// `q = q_c ⊗ q₀`, `t = q_c ⊗ (0, t₀) ⊗ q_c* + t_c`, against central differences in
+    /// `(q_c, t_c)` at a unit `q_c`.
+    #[test]
+    fn correction_cotangent_matches_central_differences() {
+        let init = Isometry3::from_parts(
+            Translation3::new(0.4, -2.0, 1.1),
+            UnitQuaternion::from_euler_angles(0.3, 1.2, -0.8),
+        );
+        let qc = Quaternion::new(0.9, 0.1, -0.3, 0.2).normalize();
+        let tc = Vector3::new(0.2, 0.5, -0.1);
+        let composed = |qc: &Quaternion<f64>, tc: &Vector3<f64>| {
+            let q = qc * init.rotation.into_inner();
+            let t0 = Quaternion::from_imag(init.translation.vector);
+            let t = (qc * t0 * qc.conjugate()).imag() + tc;
+            loss(&q, &t)
+        };
+        let unit = UnitQuaternion::new_unchecked(qc);
+        let q = qc * init.rotation.into_inner();
+        let t = unit * init.translation.vector + tc;
+        let (gq, gt) = grad(&q, &t);
+        let (gqc, gtc) = correction_cotangent(&init, &unit, &gq, &gt);
+        let h = 1e-6;
+        for k in 0..4 {
+            let mut e = Vector4::zeros();
+            e[k] = h;
+            let fd = (composed(&Quaternion::from(qc.coords + e), &tc)
+                - composed(&Quaternion::from(qc.coords - e), &tc))
+                / (2.0 * h);
+            assert!(
+                (fd - gqc.coords[k]).abs() < 1e-8,
+                "q[{k}]: {fd} vs {}",
+                gqc.coords[k]
+            );
+        }
+        for k in 0..3 {
+            let mut e = Vector3::zeros();
+            e[k] = h;
+            let fd = (composed(&qc, &(tc + e)) - composed(&qc, &(tc - e))) / (2.0 * h);
+            assert!((fd - gtc[k]).abs() < 1e-8, "t[{k}]: {fd} vs {}", gtc[k]);
+        }
+    }
+}

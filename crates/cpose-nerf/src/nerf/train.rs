@@ -1,0 +1,211 @@
+//! Joint optimisation of a radiance field and the training cameras' poses (BARF's loop).
+//!
+//! Every step draws the same `rays_per_step / N` random pixels in each of the `N` training
+//! images (BARF: `train_data.all` with shared pixel indices), renders them from the current
+//! poses with jittered depths, and takes one Adam step on the field (per parameter group) and
+//! one on the pose correction, from the mean squared colour error
+//! `L = 1/(3R) Σ_r ‖C_r − y_r‖²`.
+
+use std::collections::BTreeMap;
+
+use anyhow::{Context, bail};
+use cpose_core::nn::{Adam, ExponentialDecay};
+use nalgebra::{Quaternion, Vector3};
+use rand::SeedableRng;
+use rand::seq::index::sample;
+use rand_chacha::ChaCha8Rng;
+
+use super::poses::FramePoses;
+use super::render::{CameraRay, RenderSettings, Renderer};
+use crate::camera::{PinholeCamera, PoseGradient};
+use crate::field3d::RadianceField;
+use crate::image::Image;
+use crate::volume::Composited;
+
+/// Optimisation settings of one run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Schedule {
+    /// Steps.
+    pub iterations: u64,
+    /// Rays per step over all training images.
+    pub rays_per_step: usize,
+    /// Learning rate `[start, end]` (exponential decay) per parameter group of the field.
+    pub field_lr: BTreeMap<String, [f64; 2]>,
+    /// Coarse-to-fine progress is `it / iterations`.
+    pub seed: u64,
+}
+
+/// One training run's state.
+pub struct Trainer<'a> {
+    field: &'a mut dyn RadianceField,
+    poses: &'a mut FramePoses,
+    images: &'a [Image],
+    camera: PinholeCamera,
+    settings: RenderSettings,
+    schedule: Schedule,
+    groups: Vec<(std::ops::Range<usize>, ExponentialDecay)>,
+    adam: Adam<f32>,
+    rng: ChaCha8Rng,
+    renderer: Renderer,
+    rays: Vec<CameraRay>,
+    targets: Vec<[f32; 3]>,
+    grad_out: Vec<Composited<f32>>,
+    grad_params: Vec<f32>,
+    pose_grads: Vec<PoseGradient>,
+    pose_cotangents: Vec<(Quaternion<f64>, Vector3<f64>)>,
+}
+
+impl<'a> Trainer<'a> {
+    /// A run over `images` (one per frame of `poses`, all of `camera`'s size).
+    pub fn new(
+        field: &'a mut dyn RadianceField,
+        poses: &'a mut FramePoses,
+        images: &'a [Image],
+        camera: PinholeCamera,
+        settings: RenderSettings,
+        schedule: Schedule,
+    ) -> anyhow::Result<Self> {
+        if images.len() != poses.times().len() || images.is_empty() {
+            bail!(
+                "{} training images for {} frame poses",
+                images.len(),
+                poses.times().len()
+            );
+        }
+        let mut groups = Vec::new();
+        for (name, range) in field.param_groups() {
+            let Some(&[lr0, lr_end]) = schedule.field_lr.get(name) else {
+                bail!(
+                    "no learning rate for the field's parameter group {name:?} (groups: {})",
+                    field
+                        .param_groups()
+                        .iter()
+                        .map(|(n, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            };
+            let decay = ExponentialDecay {
+                lr0,
+                lr_end,
+                max_iter: schedule.iterations,
+            };
+            groups.push((range, decay));
+        }
+        let n = field.num_params();
+        Ok(Self {
+            adam: Adam::new(n),
+            grad_params: vec![0.0; n],
+            rng: ChaCha8Rng::seed_from_u64(schedule.seed),
+            pose_grads: vec![PoseGradient::new(); images.len()],
+            pose_cotangents: Vec::with_capacity(images.len()),
+            field,
+            poses,
+            images,
+            camera,
+            settings,
+            schedule,
+            groups,
+            renderer: Renderer::default(),
+            rays: Vec::new(),
+            targets: Vec::new(),
+            grad_out: Vec::new(),
+        })
+    }
+
+    /// One step at iteration `it`; returns the loss (mean squared error) before the step.
+    pub fn step(&mut self, it: u64) -> anyhow::Result<f64> {
+        let progress = it as f64 / self.schedule.iterations.max(1) as f64;
+        self.field.set_progress(progress);
+        let poses = self.poses.update(progress)?;
+        let (w, h) = (self.camera.width, self.camera.height);
+        let per_image = (self.schedule.rays_per_step / self.images.len()).clamp(1, w * h);
+        let pixels = sample(&mut self.rng, w * h, per_image);
+        self.rays.clear();
+        self.targets.clear();
+        for (i, (pose, image)) in poses.iter().zip(self.images).enumerate() {
+            for p in pixels.iter() {
+                let (x, y) = (p % w, p / w);
+                self.rays
+                    .push(CameraRay::new(i, pose, self.camera.ray_direction_cam(x, y)));
+                self.targets.push(image.pixel(x, y));
+            }
+        }
+        let out = self.renderer.forward(
+            &mut *self.field,
+            &self.settings,
+            &self.rays,
+            Some(&mut self.rng),
+        );
+        let r = out.len();
+        let scale = 2.0 / (3 * r) as f32;
+        let mut sse = 0.0f64;
+        self.grad_out.clear();
+        for (o, y) in out.iter().zip(&self.targets) {
+            let mut g = Composited::default();
+            for c in 0..3 {
+                let e = o.rgb[c] - y[c];
+                sse += (e as f64) * (e as f64);
+                g.rgb[c] = scale * e;
+            }
+            self.grad_out.push(g);
+        }
+        let loss = sse / (3 * r) as f64;
+        if !loss.is_finite() {
+            bail!("the loss is {loss} at iteration {it}");
+        }
+        self.grad_params.fill(0.0);
+        let trainable = self.poses.is_trainable();
+        for g in &mut self.pose_grads {
+            *g = PoseGradient::new();
+        }
+        self.renderer.backward(
+            &mut *self.field,
+            &self.settings,
+            &self.rays,
+            &self.grad_out,
+            &mut self.grad_params,
+            trainable.then_some(&mut self.pose_grads[..]),
+        );
+        self.adam.begin_step();
+        let params = self.field.params_mut();
+        for (range, decay) in &self.groups {
+            self.adam.update(
+                range.start,
+                &mut params[range.clone()],
+                &self.grad_params[range.clone()],
+                decay.lr(it),
+            );
+        }
+        if trainable {
+            self.pose_cotangents.clear();
+            for (g, pose) in self.pose_grads.iter().zip(self.poses.current()) {
+                self.pose_cotangents
+                    .push(g.quaternion_translation(&pose.rotation));
+            }
+            self.poses.step(&self.pose_cotangents, it)?;
+        }
+        Ok(loss)
+    }
+
+    /// Writes the field's and the pose correction's parameters after `iterations` steps to
+    /// `path` (atomically, so the previous checkpoint survives a crash): the ASCII line
+    /// `cpose-nerf checkpoint v1 <iterations> <field params> <pose params>\n`, then both
+    /// parameter vectors as little-endian `f32`.
+    pub fn save_checkpoint(&self, path: &std::path::Path, iterations: u64) -> anyhow::Result<()> {
+        let field = self.field.params();
+        let pose = self.poses.params();
+        let mut bytes = format!(
+            "cpose-nerf checkpoint v1 {iterations} {} {}\n",
+            field.len(),
+            pose.len()
+        )
+        .into_bytes();
+        bytes.reserve(4 * (field.len() + pose.len()));
+        for v in field.iter().chain(&pose) {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        cpose_core::fs::write_atomic(path, bytes)
+            .with_context(|| format!("cannot write the checkpoint {}", path.display()))
+    }
+}
