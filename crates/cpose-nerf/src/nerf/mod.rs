@@ -44,7 +44,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::PinholeCamera;
 use crate::data::{Dataset, blender, llff};
-use crate::field3d::{HashGridConfig, NerfMlpConfig, RadianceField, SceneBounds};
+use crate::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use crate::image::Image;
 use crate::metrics::ssim;
 use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
@@ -249,55 +249,18 @@ impl Default for EvalConfig {
     }
 }
 
-/// The radiance field chosen by `[field] kind`.
-#[derive(Clone, Debug)]
-enum FieldChoice {
-    Grid(HashGridConfig),
-    Mlp(NerfMlpConfig),
-}
-
-impl FieldChoice {
-    fn from_section(section: &Section<'_>) -> anyhow::Result<Self> {
-        if !section.exists()? {
-            return Ok(Self::Grid(HashGridConfig::default()));
-        }
-        let (kind, at) = section.kind()?;
-        Ok(match kind.as_str() {
-            "grid" => Self::Grid(section.decode_params()?),
-            "mlp" => Self::Mlp(section.decode_params()?),
-            other => {
-                return Err(section
-                    .config()
-                    .error_at(
-                        Some(at),
-                        format!("unknown radiance field kind {other:?}; known kinds: grid, mlp"),
-                    )
-                    .into());
-            }
-        })
+/// The radiance field of `[field]` (default: the hash grid), its seed offset by the run's.
+fn field_config(section: &Section<'_>, seed: u64) -> anyhow::Result<RadianceFieldConfig> {
+    let mut config = if section.exists()? {
+        section.decode::<RadianceFieldConfig>()?
+    } else {
+        RadianceFieldConfig::default()
+    };
+    match &mut config {
+        RadianceFieldConfig::Grid(c) => c.seed = c.seed.wrapping_add(seed),
+        RadianceFieldConfig::Mlp(c) => c.seed = c.seed.wrapping_add(seed),
     }
-
-    fn init(&self, seed: u64, bounds: SceneBounds) -> anyhow::Result<Box<dyn RadianceField>> {
-        Ok(match self {
-            Self::Grid(c) => {
-                let mut c = c.clone();
-                c.seed = c.seed.wrapping_add(seed);
-                Box::new(c.init::<f32>(bounds)?)
-            }
-            Self::Mlp(c) => {
-                let mut c = c.clone();
-                c.seed = c.seed.wrapping_add(seed);
-                Box::new(c.init::<f32>(bounds)?)
-            }
-        })
-    }
-
-    fn name(&self) -> &'static str {
-        match self {
-            Self::Grid(_) => "grid",
-            Self::Mlp(_) => "mlp",
-        }
-    }
+    Ok(config)
 }
 
 /// Training and test views with their true poses, and how to render the scene.
@@ -628,7 +591,7 @@ fn correction(
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
     let noise_section = input.config.section("noise");
-    let field_choice = FieldChoice::from_section(&input.config.section("field"))?;
+    let field_config = field_config(&input.config.section("field"), input.run.seed)?;
     let views = match exp.data.source {
         Source::Synthetic => synthetic_views(&exp)?,
         _ => dataset_views(&exp)?,
@@ -652,7 +615,10 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         views.camera.width,
         views.camera.height,
         views.test_images.len(),
-        field_choice.name(),
+        match field_config {
+            RadianceFieldConfig::Grid(_) => "grid",
+            RadianceFieldConfig::Mlp(_) => "mlp",
+        },
         noise,
         iterations,
         train.rays_per_step,
@@ -665,7 +631,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let mut results = BTreeMap::new();
     for &method in &train.methods {
         let started = Instant::now();
-        let mut field = field_choice.init(seed, views.bounds)?;
+        let mut field = field_config.init::<f32>(views.bounds)?;
         let init = if method == Method::TruePoses {
             views.train_truth.clone()
         } else {
