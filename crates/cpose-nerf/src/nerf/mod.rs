@@ -658,7 +658,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         let checkpoint = input
             .run_dir
             .file(format!("checkpoint_{}.bin", method.key()));
-        let mut recent = Vec::with_capacity(100);
+        // The last 100 losses, a ring.
+        let mut recent = [0.0f64; 100];
         {
             let mut trainer = Trainer::new(
                 field.as_mut(),
@@ -676,10 +677,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         checkpoint.display()
                     )
                 })?;
-                if recent.len() == 100 {
-                    recent.remove(0);
-                }
-                recent.push(loss);
+                recent[it % recent.len()] = loss;
                 if train.checkpoint_every > 0 && (it + 1) % train.checkpoint_every == 0 {
                     trainer.save_checkpoint(&checkpoint, it as u64 + 1)?;
                 }
@@ -695,7 +693,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             method,
             field.as_mut(),
             &poses,
-            recent.iter().sum::<f64>() / recent.len().max(1) as f64,
+            recent[..iterations.min(recent.len())].iter().sum::<f64>()
+                / iterations.clamp(1, recent.len()) as f64,
             iterations,
             wall_s,
             seed,

@@ -31,11 +31,11 @@ pub struct Schedule {
     pub rays_per_step: usize,
     /// Learning rate `[start, end]` (exponential decay) per parameter group of the field.
     pub field_lr: BTreeMap<String, [f64; 2]>,
-    /// Coarse-to-fine progress is `it / iterations`.
+    /// Seed of the pixel and depth draws.
     pub seed: u64,
 }
 
-/// One training run's state.
+/// One training run's state (coarse-to-fine progress is `it / iterations`).
 pub struct Trainer<'a> {
     field: &'a mut dyn RadianceField,
     poses: &'a mut FramePoses,
