@@ -61,6 +61,16 @@ pub fn load_llff(scene_dir: impl AsRef<Path>, factor: u32) -> Result<Dataset, Da
     } else {
         scene_dir.join(format!("images_{factor}"))
     };
+    if !folder.is_dir() {
+        return Err(DataError::Format {
+            expected: format!(
+                "a folder of {rows} images (downscale factor {factor}), one per row of {}",
+                npy_path.display()
+            ),
+            found: format!("no such folder ({})", image_folders(scene_dir)),
+            path: folder,
+        });
+    }
     let paths = list_images(&folder)?;
     if paths.len() != rows {
         return Err(DataError::Format {
@@ -80,6 +90,9 @@ pub fn load_llff(scene_dir: impl AsRef<Path>, factor: u32) -> Result<Dataset, Da
         let r_llff = Matrix3::from_fn(m);
         let centre = Vector3::new(m(0, 3), m(1, 3), m(2, 3));
         let what = format!("row {i}");
+        // Checked first as stored, so that an error shows the file's numbers (`P` is a
+        // rotation: `R_llff` is one iff `R_llff · P` is).
+        isometry_from_rt(r_llff, centre, &npy_path, &what)?;
         world_from_camera.push(isometry_from_rt(
             r_llff * permutation,
             centre,
@@ -119,6 +132,26 @@ pub fn load_llff(scene_dir: impl AsRef<Path>, factor: u32) -> Result<Dataset, Da
         bounds: Some(bounds),
         names,
     })
+}
+
+/// The `images*` folders of `scene_dir`, sorted, for an error message: `"the scene has images,
+/// images_4"` or `"the scene has no images* folder"`.
+fn image_folders(scene_dir: &Path) -> String {
+    let mut names: Vec<String> = std::fs::read_dir(scene_dir)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let name = e.file_name().into_string().ok()?;
+            (name.starts_with("images") && e.path().is_dir()).then_some(name)
+        })
+        .collect();
+    names.sort();
+    if names.is_empty() {
+        "the scene has no images* folder".to_owned()
+    } else {
+        format!("the scene has {}", names.join(", "))
+    }
 }
 
 /// The image files (`.png`, `.jpg`, `.jpeg`, any case) of `folder`, sorted by file name.
@@ -213,7 +246,10 @@ pub fn read_npy_f64_matrix(path: &Path, cols: usize) -> Result<(usize, Vec<f64>)
         _ => {
             return Err(bad(
                 &format!("'shape': (N, {cols}) with N ≥ 1"),
-                format!("header {}", header.trim()),
+                match dict_value(header, "shape") {
+                    Some(shape) => format!("'shape': {shape}"),
+                    None => format!("header {}", header.trim()),
+                },
             ));
         }
     };
@@ -229,6 +265,43 @@ pub fn read_npy_f64_matrix(path: &Path, cols: usize) -> Result<(usize, Vec<f64>)
         .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
         .collect();
     Ok((rows, values))
+}
+
+/// Writes `values` (row-major, `values.len() / cols` rows) as a 2-D little-endian float64 NPY
+/// file (format 1.0, C order) that [`read_npy_f64_matrix`] reads back: with `cols = 17`, an LLFF
+/// `poses_bounds.npy`.
+///
+/// # Panics
+/// If `cols` is 0 or does not divide `values.len()`.
+pub fn write_npy_f64_matrix(path: &Path, cols: usize, values: &[f64]) -> std::io::Result<()> {
+    assert!(
+        cols >= 1 && values.len().is_multiple_of(cols),
+        "{} values do not fill rows of {cols}",
+        values.len()
+    );
+    let dict = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {cols}), }}",
+        values.len() / cols
+    );
+    std::fs::write(path, npy_bytes(&dict, values))
+}
+
+/// An NPY 1.0 file: magic, version, header length, the header dict padded with spaces and a
+/// newline so that the data starts at a multiple of 64 bytes, then `values` little-endian.
+fn npy_bytes(dict: &str, values: &[f64]) -> Vec<u8> {
+    let mut header = dict.to_owned();
+    while !(10 + header.len() + 1).is_multiple_of(64) {
+        header.push(' ');
+    }
+    header.push('\n');
+    let header_len = u16::try_from(header.len()).expect("an NPY dict of a 2-D shape is short");
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&header_len.to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    bytes
 }
 
 /// The raw text of `key`'s value in a Python dict literal such as
@@ -270,18 +343,7 @@ mod tests {
 
     /// An NPY v1 file with the given header dict and values.
     fn write_npy(path: &Path, dict: &str, values: &[f64]) {
-        let mut header = dict.to_owned();
-        while !(10 + header.len() + 1).is_multiple_of(64) {
-            header.push(' ');
-        }
-        header.push('\n');
-        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-        bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-        bytes.extend_from_slice(header.as_bytes());
-        for v in values {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-        std::fs::write(path, bytes).unwrap();
+        std::fs::write(path, npy_bytes(dict, values)).unwrap();
     }
 
     /// One LLFF row: identity-ish LLFF rotation columns (down, right, back) = world (x, y, z).
@@ -395,6 +457,111 @@ mod tests {
         // Missing npy.
         let err = load_llff(dir.join("nowhere"), 4).unwrap_err().to_string();
         assert!(err.contains("poses_bounds.npy"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A fresh valid scene: `n` rows and `n` textured `10×8` PNGs `image000.png, …` in
+    /// `images_8/`.
+    fn valid_scene(name: &str, n: usize) -> PathBuf {
+        let dir = temp_dir(name);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let folder = dir.join("images_8");
+        std::fs::create_dir_all(&folder).unwrap();
+        let values: Vec<f64> = (0..n).flat_map(|i| row([i as f64, 0.0, 0.0])).collect();
+        write_npy_f64_matrix(&dir.join("poses_bounds.npy"), 17, &values).unwrap();
+        for i in 0..n {
+            crate::image::procedural_texture(10, 8, i as u64)
+                .save_png(folder.join(format!("image{i:03}.png")))
+                .unwrap();
+        }
+        assert_eq!(load_llff(&dir, 8).unwrap().len(), n);
+        dir
+    }
+
+    /// The message of `load_llff`'s error, asserting that it is one line and names `file`.
+    fn one_line_error(dir: &Path, factor: u32, file: &str) -> String {
+        let message = load_llff(dir, factor).unwrap_err().to_string();
+        assert_eq!(message.lines().count(), 1, "{message}");
+        assert!(message.contains(file), "{file}: {message}");
+        message
+    }
+
+    /// Issue "bad input: missing images, a poses_bounds.npy of the wrong shape, mismatched image
+    /// sizes — one clear message": each bad scene is an error (not a panic) whose message is one
+    /// line naming the file or folder at fault and what was expected.
+    #[test]
+    fn bad_scenes_are_rejected_with_one_line_naming_the_file() {
+        let dir = valid_scene("bad", 3);
+        let folder = dir.join("images_8");
+        let npy = dir.join("poses_bounds.npy");
+        let image1 = folder.join("image001.png");
+        let good_png = std::fs::read(&image1).unwrap();
+
+        // A missing image: 2 images for 3 rows.
+        std::fs::remove_file(&image1).unwrap();
+        let m = one_line_error(&dir, 8, "images_8");
+        assert!(
+            m.contains("expected 3 images, one per row of")
+                && m.contains("poses_bounds.npy")
+                && m.contains("got 2 images"),
+            "{m}"
+        );
+        std::fs::write(&image1, &good_png).unwrap();
+
+        // No folder for the factor: the message lists the folders there are.
+        let m = one_line_error(&dir, 4, "images_4");
+        assert!(
+            m.contains("expected a folder of 3 images (downscale factor 4)")
+                && m.contains("got no such folder (the scene has images_8)"),
+            "{m}"
+        );
+        let m = one_line_error(&dir, 1, "images:");
+        assert!(m.contains("no such folder"), "{m}");
+
+        // poses_bounds.npy of the wrong shape: N × 15, and 1-D.
+        let values: Vec<f64> = (0..3).flat_map(|i| row([i as f64, 0.0, 0.0])).collect();
+        write_npy_f64_matrix(&npy, 15, &values[..45]).unwrap();
+        let m = one_line_error(&dir, 8, "poses_bounds.npy");
+        assert!(
+            m.contains("expected 'shape': (N, 17) with N ≥ 1, got 'shape': (3, 15)"),
+            "{m}"
+        );
+        write_npy(
+            &npy,
+            "{'descr': '<f8', 'fortran_order': False, 'shape': (51,), }",
+            &values,
+        );
+        let m = one_line_error(&dir, 8, "poses_bounds.npy");
+        assert!(m.contains("got 'shape': (51,)"), "{m}");
+        // A row that is not a pose (nalgebra prints matrices on several lines; we do not).
+        let mut bad_rotation = values.clone();
+        bad_rotation[17] = 2.0;
+        write_npy_f64_matrix(&npy, 17, &bad_rotation).unwrap();
+        let m = one_line_error(&dir, 8, "poses_bounds.npy");
+        assert!(m.contains("row 1: a rotation"), "{m}");
+        write_npy_f64_matrix(&npy, 17, &values).unwrap();
+
+        // Images of different sizes: named with the first image and both sizes.
+        crate::image::procedural_texture(9, 8, 1)
+            .save_png(&image1)
+            .unwrap();
+        let m = one_line_error(&dir, 8, "image001.png");
+        assert!(
+            m.contains("expected the size of the first image")
+                && m.contains("image000.png, 10×8, got 9×8"),
+            "{m}"
+        );
+
+        // A truncated PNG, and a file that is not an image at all.
+        std::fs::write(&image1, &good_png[..good_png.len() / 2]).unwrap();
+        let m = one_line_error(&dir, 8, "image001.png");
+        assert!(m.contains("expected valid PNG data"), "{m}");
+        std::fs::write(&image1, b"not an image").unwrap();
+        let m = one_line_error(&dir, 8, "image001.png");
+        assert!(m.contains("expected PNG or JPEG data"), "{m}");
+
+        std::fs::write(&image1, &good_png).unwrap();
+        assert_eq!(load_llff(&dir, 8).unwrap().len(), 3);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -98,11 +98,13 @@ pub enum DataError {
         found: String,
     },
     /// An image's size differs from the first image's.
-    #[error("image {}: expected the size of the first image, {}×{}, got {}×{}",
-        .path.display(), .expected.0, .expected.1, .found.0, .found.1)]
+    #[error("image {}: expected the size of the first image {}, {}×{}, got {}×{}",
+        .path.display(), .first.display(), .expected.0, .expected.1, .found.0, .found.1)]
     ImageSize {
         /// The image file.
         path: PathBuf,
+        /// The first image file, whose size all must have.
+        first: PathBuf,
         /// The first image's `(width, height)`.
         expected: (usize, usize),
         /// This image's `(width, height)`.
@@ -127,6 +129,7 @@ fn load_same_size(
             Some(expected) if expected != found => {
                 return Err(DataError::ImageSize {
                     path: path.clone(),
+                    first: paths[0].clone(),
                     expected,
                     found,
                 });
@@ -168,9 +171,15 @@ fn isometry_from_rt(
             expected: format!(
                 "{what}: a rotation (|RᵀR − I| and |det R − 1| below {ROTATION_TOLERANCE}) and a finite translation"
             ),
+            // Rows inline: nalgebra's `Display` of a matrix spans several lines.
             found: format!(
-                "|RᵀR − I| = {orth_err:.3e}, det R = {:.6}, R = {rotation}, t = {translation}",
-                rotation.determinant()
+                "|RᵀR − I| = {orth_err:.3e}, det R = {:.6}, R = {:?}, t = {:?}",
+                rotation.determinant(),
+                rotation
+                    .row_iter()
+                    .map(|r| [r[0], r[1], r[2]])
+                    .collect::<Vec<_>>(),
+                <[f64; 3]>::from(translation),
             ),
         });
     }
