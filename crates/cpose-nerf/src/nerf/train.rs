@@ -11,8 +11,7 @@ use std::collections::BTreeMap;
 use anyhow::{Context, bail};
 use cpose_core::nn::{Adam, ExponentialDecay};
 use nalgebra::{Quaternion, Vector3};
-use rand::SeedableRng;
-use rand::seq::index::sample;
+use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::poses::FramePoses;
@@ -46,6 +45,8 @@ pub struct Trainer<'a> {
     groups: Vec<(std::ops::Range<usize>, ExponentialDecay)>,
     adam: Adam<f32>,
     rng: ChaCha8Rng,
+    /// A permutation of the pixel indices `0..w·h`, the state of [`draw_distinct`].
+    pixels: Vec<usize>,
     renderer: Renderer,
     rays: Vec<CameraRay>,
     targets: Vec<[f32; 3]>,
@@ -97,6 +98,7 @@ impl<'a> Trainer<'a> {
             adam: Adam::new(n),
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
+            pixels: (0..camera.width * camera.height).collect(),
             pose_grads: vec![PoseGradient::new(); images.len()],
             pose_cotangents: Vec::with_capacity(images.len()),
             field,
@@ -120,11 +122,11 @@ impl<'a> Trainer<'a> {
         let poses = self.poses.update(progress)?;
         let (w, h) = (self.camera.width, self.camera.height);
         let per_image = (self.schedule.rays_per_step / self.images.len()).clamp(1, w * h);
-        let pixels = sample(&mut self.rng, w * h, per_image);
+        let pixels = draw_distinct(&mut self.rng, &mut self.pixels, per_image);
         self.rays.clear();
         self.targets.clear();
         for (i, (pose, image)) in poses.iter().zip(self.images).enumerate() {
-            for p in pixels.iter() {
+            for &p in pixels.iter() {
                 let (x, y) = (p % w, p / w);
                 self.rays
                     .push(CameraRay::new(i, pose, self.camera.ray_direction_cam(x, y)));
@@ -207,5 +209,168 @@ impl<'a> Trainer<'a> {
         }
         cpose_core::fs::write_atomic(path, bytes)
             .with_context(|| format!("cannot write the checkpoint {}", path.display()))
+    }
+}
+
+/// `k` distinct entries of `permutation` drawn uniformly at random, in random order: a partial
+/// Fisher–Yates shuffle, which swaps entry `i = 0, …, k − 1` with a uniform `j ∈ [i, n)` and
+/// returns the first `k`. The result is uniform over ordered `k`-subsets whatever order the
+/// buffer is in, so the buffer is kept between calls instead of being reset (no allocation).
+///
+/// # Panics
+/// If `k > permutation.len()`.
+fn draw_distinct<'p>(rng: &mut impl RngExt, permutation: &'p mut [usize], k: usize) -> &'p [usize] {
+    let n = permutation.len();
+    assert!(k <= n, "cannot draw {k} distinct entries of {n}");
+    for i in 0..k {
+        permutation.swap(i, rng.random_range(i..n));
+    }
+    &permutation[..k]
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use super::*;
+    use crate::field3d::{HashGridConfig, SceneBounds};
+    use crate::nerf::poses::PoseSchedules;
+    use crate::scene::{MonocularOrbit, SyntheticScene};
+    use crate::volume::Sampling;
+
+    /// A small run on the synthetic scene: 4 views of 16×16 along the orbit, a small hash grid,
+    /// BARF's per-frame correction starting at the true poses.
+    pub(in crate::nerf) struct Tiny {
+        pub field: Box<dyn RadianceField>,
+        pub poses: FramePoses,
+        pub images: Vec<Image>,
+        pub camera: PinholeCamera,
+    }
+
+    impl Tiny {
+        pub fn new() -> Self {
+            let orbit = MonocularOrbit {
+                frames: 4,
+                ..MonocularOrbit::default()
+            };
+            let camera = PinholeCamera::from_fov_x(16, 16, 40f64.to_radians());
+            let scene = SyntheticScene::object_centric();
+            let times = orbit.frame_times();
+            let truth: Vec<_> = times.iter().map(|&t| orbit.world_from_camera(t)).collect();
+            let images = truth
+                .iter()
+                .map(|pose| scene.render(&camera, pose, 1).image)
+                .collect();
+            let bounds = SceneBounds {
+                centre: [0.0; 3],
+                radius: scene.bounding_radius(),
+                unbounded: false,
+            };
+            let grid = HashGridConfig {
+                levels: 4,
+                log2_table_size: 10,
+                ..HashGridConfig::default()
+            };
+            let decay = |lr0| ExponentialDecay {
+                lr0,
+                lr_end: lr0,
+                max_iter: 10,
+            };
+            let correction = cpose_core::DiscretePoses::<f32>::new(&times).unwrap();
+            Self {
+                field: Box::new(grid.init::<f32>(bounds).unwrap()),
+                poses: FramePoses::new(
+                    truth,
+                    times,
+                    Some(Box::new(correction)),
+                    PoseSchedules {
+                        rotation: decay(1e-3),
+                        translation: decay(1e-3),
+                        pose: decay(1e-3),
+                    },
+                ),
+                images,
+                camera,
+            }
+        }
+
+        /// A trainer of `iterations` steps of 64 rays × 16 samples, seed 0.
+        pub fn trainer(&mut self, iterations: u64) -> Trainer<'_> {
+            let settings = RenderSettings {
+                samples: 16,
+                sampling: Sampling::Metric {
+                    near: 2.0,
+                    far: 6.0,
+                },
+                background: Some([1.0; 3]),
+            };
+            let schedule = Schedule {
+                iterations,
+                rays_per_step: 64,
+                field_lr: BTreeMap::from([
+                    ("grid".to_owned(), [1e-2, 1e-3]),
+                    ("mlp".to_owned(), [1e-3, 1e-4]),
+                ]),
+                seed: 0,
+            };
+            Trainer::new(
+                self.field.as_mut(),
+                &mut self.poses,
+                &self.images,
+                self.camera,
+                settings,
+                schedule,
+            )
+            .unwrap()
+        }
+    }
+
+    #[test]
+    fn draw_distinct_is_uniform_over_distinct_entries_and_seeded() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut permutation: Vec<usize> = (0..10).collect();
+        let mut counts = [0usize; 10];
+        let draws = 20_000;
+        for _ in 0..draws {
+            let drawn = draw_distinct(&mut rng, &mut permutation, 4);
+            let mut sorted = drawn.to_vec();
+            sorted.sort();
+            sorted.dedup();
+            assert_eq!(sorted.len(), 4, "{drawn:?}");
+            for &p in drawn {
+                counts[p] += 1;
+            }
+        }
+        // Each entry is drawn with probability 4/10: 8000 of 20,000, binomial standard
+        // deviation sqrt(20,000 · 0.4 · 0.6) ≈ 69, so ±400 is about 6σ.
+        for (p, &c) in counts.iter().enumerate() {
+            assert!(c.abs_diff(8000) < 400, "entry {p}: {c}");
+        }
+        // Still a permutation; all of it when k = n.
+        let mut all = draw_distinct(&mut rng, &mut permutation, 10).to_vec();
+        all.sort();
+        assert_eq!(all, (0..10).collect::<Vec<_>>());
+        // The same seed and buffer give the same draws.
+        let draw = |seed| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let mut permutation: Vec<usize> = (0..100).collect();
+            (0..3)
+                .map(|_| draw_distinct(&mut rng, &mut permutation, 5).to_vec())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(draw(1), draw(1));
+        assert_ne!(draw(1), draw(2));
+    }
+
+    #[test]
+    fn steps_are_deterministic_for_a_seed() {
+        let losses = || {
+            let mut tiny = Tiny::new();
+            let mut trainer = tiny.trainer(3);
+            (0..3)
+                .map(|it| trainer.step(it).unwrap())
+                .collect::<Vec<_>>()
+        };
+        let first = losses();
+        assert!(first.iter().all(|l| l.is_finite() && *l > 0.0), "{first:?}");
+        assert_eq!(first, losses());
     }
 }
