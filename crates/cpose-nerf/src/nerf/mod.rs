@@ -29,7 +29,7 @@ pub mod render;
 pub mod train;
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
@@ -669,20 +669,17 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 views.settings,
                 schedule,
             )?;
-            for it in 0..iterations {
-                let loss = trainer.step(it as u64).with_context(|| {
-                    format!(
-                        "method {}: training stopped; the last good checkpoint is {}",
-                        method.key(),
-                        checkpoint.display()
-                    )
-                })?;
-                recent[it % recent.len()] = loss;
-                if train.checkpoint_every > 0 && (it + 1) % train.checkpoint_every == 0 {
-                    trainer.save_checkpoint(&checkpoint, it as u64 + 1)?;
-                }
-                progress.inc(1);
-            }
+            train_steps(
+                &mut trainer,
+                method,
+                iterations,
+                train.checkpoint_every,
+                &checkpoint,
+                |it, loss| {
+                    recent[it % recent.len()] = loss;
+                    progress.inc(1);
+                },
+            )?;
         }
         progress.finish();
         let wall_s = started.elapsed().as_secs_f64();
@@ -715,6 +712,43 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         // Write as we go so a long sweep keeps what is done.
         let metrics = BTreeMap::from([(views.condition.clone(), &results)]);
         input.run_dir.write_json("metrics.json", &metrics)?;
+    }
+    Ok(())
+}
+
+/// Steps `trainer` through iterations `0..iterations`, passing each loss to `on_loss`, and
+/// writes `checkpoint` after every `checkpoint_every` steps (0: never). A failed step or
+/// checkpoint ends the run with one error naming the method and the last good checkpoint (a
+/// diverged state never overwrites it, see [`Trainer::save_checkpoint`]) or saying there is none.
+fn train_steps(
+    trainer: &mut Trainer<'_>,
+    method: Method,
+    iterations: usize,
+    checkpoint_every: usize,
+    checkpoint: &Path,
+    mut on_loss: impl FnMut(usize, f64),
+) -> anyhow::Result<()> {
+    let stopped = |trainer: &Trainer<'_>| {
+        let last = match trainer.last_checkpoint() {
+            Some((path, steps)) => {
+                format!(
+                    "last good checkpoint: {}, after {steps} steps",
+                    path.display()
+                )
+            }
+            None if checkpoint_every == 0 => "checkpoints are off".to_owned(),
+            None => format!("no checkpoint yet, one every {checkpoint_every} steps"),
+        };
+        format!("method {}: training stopped ({last})", method.key())
+    };
+    for it in 0..iterations {
+        let loss = trainer.step(it as u64).with_context(|| stopped(trainer))?;
+        on_loss(it, loss);
+        if checkpoint_every > 0 && (it + 1) % checkpoint_every == 0 {
+            trainer
+                .save_checkpoint(checkpoint, it as u64 + 1)
+                .with_context(|| stopped(trainer))?;
+        }
     }
     Ok(())
 }
@@ -860,4 +894,123 @@ fn side_by_side(a: &Image, b: &Image) -> Image {
             b.pixel(x - w, y)
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::ops::Range;
+
+    use super::*;
+    use train::tests::Tiny;
+
+    /// A field whose parameters all turn NaN at the start of step `poison_at` (the trainer sets
+    /// the progress once per step).
+    struct NanFrom {
+        inner: Box<dyn RadianceField>,
+        poison_at: usize,
+        steps: usize,
+    }
+
+    impl RadianceField for NanFrom {
+        fn num_params(&self) -> usize {
+            self.inner.num_params()
+        }
+        fn params(&self) -> &[f32] {
+            self.inner.params()
+        }
+        fn params_mut(&mut self) -> &mut [f32] {
+            self.inner.params_mut()
+        }
+        fn param_groups(&self) -> Vec<(&'static str, Range<usize>)> {
+            self.inner.param_groups()
+        }
+        fn set_progress(&mut self, progress: f64) {
+            if self.steps == self.poison_at {
+                self.inner.params_mut().fill(f32::NAN);
+            }
+            self.steps += 1;
+            self.inner.set_progress(progress);
+        }
+        fn forward(&mut self, points: &[f32], sigma: &mut [f32], rgb: &mut [f32]) {
+            self.inner.forward(points, sigma, rgb);
+        }
+        fn backward(
+            &mut self,
+            grad_sigma: &[f32],
+            grad_rgb: &[f32],
+            grad: &mut [f32],
+            grad_points: &mut [f32],
+        ) {
+            self.inner.backward(grad_sigma, grad_rgb, grad, grad_points);
+        }
+    }
+
+    /// Runs 8 steps with a checkpoint every `every`, the field turning NaN at step `poison_at`;
+    /// returns the error message and the checkpoint file's content, if any.
+    fn diverging_run(every: usize, poison_at: usize) -> (String, Option<Vec<u8>>) {
+        let dir = std::env::temp_dir().join(format!(
+            "cpose-nerf-diverge-{}-{every}-{poison_at}",
+            std::process::id()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let checkpoint = dir.join("checkpoint_barf.bin");
+        let mut tiny = Tiny::new();
+        let inner = tiny.field;
+        tiny.field = Box::new(NanFrom {
+            inner,
+            poison_at,
+            steps: 0,
+        });
+        let mut trainer = tiny.trainer(8);
+        let mut losses = Vec::new();
+        let err = train_steps(
+            &mut trainer,
+            Method::Barf,
+            8,
+            every,
+            &checkpoint,
+            |it, loss| losses.push((it, loss)),
+        )
+        .unwrap_err();
+        assert_eq!(losses.len(), poison_at, "{losses:?}");
+        let message = format!("{err:#}").replace(&dir.display().to_string(), "DIR");
+        let saved = std::fs::read(&checkpoint).ok();
+        std::fs::remove_dir_all(&dir).unwrap();
+        (message, saved)
+    }
+
+    /// Issue "a NaN loss — one clear message, the last good checkpoint kept": the task's error
+    /// names the method, the iteration and the checkpoint that is still good.
+    #[test]
+    fn a_nan_loss_ends_training_with_one_line_naming_the_last_good_checkpoint() {
+        let (message, saved) = diverging_run(2, 5);
+        assert_eq!(
+            message,
+            "method barf: training stopped (last good checkpoint: DIR/checkpoint_barf.bin, \
+             after 4 steps): the loss is NaN at iteration 5"
+        );
+        // The checkpoint of step 4, finite: written before the field diverged.
+        let saved = saved.expect("a checkpoint after 2 and 4 steps");
+        let header_end = saved.iter().position(|&b| b == b'\n').unwrap();
+        let header = std::str::from_utf8(&saved[..header_end]).unwrap();
+        assert!(
+            header.starts_with("cpose-nerf checkpoint v1 4 "),
+            "{header}"
+        );
+        assert!(
+            saved[header_end + 1..]
+                .chunks_exact(4)
+                .all(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]).is_finite())
+        );
+
+        let (message, saved) = diverging_run(4, 3);
+        assert_eq!(
+            message,
+            "method barf: training stopped (no checkpoint yet, one every 4 steps): the loss is \
+             NaN at iteration 3"
+        );
+        assert_eq!(saved, None);
+        let (message, _) = diverging_run(0, 1);
+        assert!(message.contains("(checkpoints are off)"), "{message}");
+    }
 }

@@ -7,6 +7,7 @@
 //! `L = 1/(3R) Σ_r ‖C_r − y_r‖²`.
 
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use cpose_core::nn::{Adam, ExponentialDecay};
@@ -47,6 +48,8 @@ pub struct Trainer<'a> {
     rng: ChaCha8Rng,
     /// A permutation of the pixel indices `0..w·h`, the state of [`draw_distinct`].
     pixels: Vec<usize>,
+    /// The last checkpoint written by [`Trainer::save_checkpoint`] and its step count.
+    last_checkpoint: Option<(PathBuf, u64)>,
     renderer: Renderer,
     rays: Vec<CameraRay>,
     targets: Vec<[f32; 3]>,
@@ -99,6 +102,7 @@ impl<'a> Trainer<'a> {
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
             pixels: (0..camera.width * camera.height).collect(),
+            last_checkpoint: None,
             pose_grads: vec![PoseGradient::new(); images.len()],
             pose_cotangents: Vec::with_capacity(images.len()),
             field,
@@ -194,9 +198,20 @@ impl<'a> Trainer<'a> {
     /// `path` (atomically, so the previous checkpoint survives a crash): the ASCII line
     /// `cpose-nerf checkpoint v1 <iterations> <field params> <pose params>\n`, then both
     /// parameter vectors as little-endian `f32`.
-    pub fn save_checkpoint(&self, path: &std::path::Path, iterations: u64) -> anyhow::Result<()> {
+    ///
+    /// Errors without writing if a parameter is not finite (a diverged run), so that `path`
+    /// keeps the last good checkpoint ([`Trainer::last_checkpoint`]).
+    pub fn save_checkpoint(&mut self, path: &Path, iterations: u64) -> anyhow::Result<()> {
         let field = self.field.params();
         let pose = self.poses.params();
+        let bad_field = field.iter().filter(|v| !v.is_finite()).count();
+        let bad_pose = pose.iter().filter(|v| !v.is_finite()).count();
+        if bad_field + bad_pose > 0 {
+            bail!(
+                "after {iterations} steps {bad_field} field and {bad_pose} pose parameters are not finite; not overwriting the checkpoint {}",
+                path.display()
+            );
+        }
         let mut bytes = format!(
             "cpose-nerf checkpoint v1 {iterations} {} {}\n",
             field.len(),
@@ -208,7 +223,16 @@ impl<'a> Trainer<'a> {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
         cpose_core::fs::write_atomic(path, bytes)
-            .with_context(|| format!("cannot write the checkpoint {}", path.display()))
+            .with_context(|| format!("cannot write the checkpoint {}", path.display()))?;
+        self.last_checkpoint = Some((path.to_path_buf(), iterations));
+        Ok(())
+    }
+
+    /// The last checkpoint [`Trainer::save_checkpoint`] wrote and after how many steps, if any.
+    pub fn last_checkpoint(&self) -> Option<(&Path, u64)> {
+        self.last_checkpoint
+            .as_ref()
+            .map(|(path, iterations)| (path.as_path(), *iterations))
     }
 }
 
@@ -372,5 +396,38 @@ pub(super) mod tests {
         let first = losses();
         assert!(first.iter().all(|l| l.is_finite() && *l > 0.0), "{first:?}");
         assert_eq!(first, losses());
+    }
+
+    /// Issue "a NaN loss — one clear message, the last good checkpoint kept".
+    #[test]
+    fn a_non_finite_loss_stops_the_step_and_keeps_the_last_checkpoint() {
+        let dir = std::env::temp_dir().join(format!("cpose-nerf-nan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("checkpoint.bin");
+        let mut tiny = Tiny::new();
+        let mut trainer = tiny.trainer(10);
+        assert_eq!(trainer.last_checkpoint(), None);
+        for it in 0..3 {
+            trainer.step(it).unwrap();
+        }
+        trainer.save_checkpoint(&path, 3).unwrap();
+        let saved = std::fs::read(&path).unwrap();
+        assert!(saved.starts_with(b"cpose-nerf checkpoint v1 3 "));
+        trainer.step(3).unwrap();
+
+        // Every field parameter NaN: the loss of the next step is NaN.
+        trainer.field.params_mut().fill(f32::NAN);
+        let err = trainer.step(4).unwrap_err().to_string();
+        assert_eq!(err, "the loss is NaN at iteration 4");
+        // A checkpoint of the diverged state is refused; the good one stays as it was.
+        let err = trainer.save_checkpoint(&path, 5).unwrap_err().to_string();
+        assert!(
+            err.contains("not finite") && err.contains("not overwriting the checkpoint"),
+            "{err}"
+        );
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert_eq!(std::fs::read(&path).unwrap(), saved);
+        assert_eq!(trainer.last_checkpoint(), Some((path.as_path(), 3)));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
