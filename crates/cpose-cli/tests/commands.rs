@@ -285,3 +285,103 @@ fn cpose_nerf_image(path: &Path, width: usize, height: usize) {
         .save_png(path)
         .expect("the test folder is writable");
 }
+
+/// Issue "bad input … one clear message": the nerf task on a broken LLFF folder — a truncated
+/// image, a missing image, a `poses_bounds.npy` of the wrong shape, images of different sizes,
+/// no folder for the downscale factor — ends with a non-zero exit and one line on stderr naming
+/// the file and what was expected, before any training.
+#[test]
+fn nerf_rejects_a_broken_llff_folder_with_one_clear_line() {
+    let root = temp_dir("nerf-bad");
+    let config = workspace_root().join("configs/llff_fern.toml");
+    // A valid scene: 4 rows (identity LLFF rotations, original 40×30, f = 50) and 4 PNGs.
+    let scene = |name: &str| {
+        let dir = root.join(name);
+        std::fs::create_dir_all(dir.join("images_8")).expect("temp dir is writable");
+        let rows: Vec<f64> = (0..4)
+            .flat_map(|i| {
+                let c = 0.1 * i as f64;
+                [
+                    1.0, 0.0, 0.0, c, 30.0, 0.0, 1.0, 0.0, 0.0, 40.0, 0.0, 0.0, 1.0, 0.0, 50.0,
+                    1.0, 10.0,
+                ]
+            })
+            .collect();
+        cpose_nerf::data::llff::write_npy_f64_matrix(&dir.join("poses_bounds.npy"), 17, &rows)
+            .expect("temp dir is writable");
+        for i in 0..4 {
+            cpose_nerf_image(&dir.join(format!("images_8/image{i:03}.png")), 12, 10);
+        }
+        dir
+    };
+    let truncated = scene("truncated");
+    let png = truncated.join("images_8/image001.png");
+    let bytes = std::fs::read(&png).unwrap();
+    std::fs::write(&png, &bytes[..bytes.len() / 2]).unwrap();
+    let missing = scene("missing");
+    std::fs::remove_file(missing.join("images_8/image003.png")).unwrap();
+    let shape = scene("shape");
+    cpose_nerf::data::llff::write_npy_f64_matrix(
+        &shape.join("poses_bounds.npy"),
+        15,
+        &[0.5; 4 * 15],
+    )
+    .unwrap();
+    let sizes = scene("sizes");
+    cpose_nerf_image(&sizes.join("images_8/image002.png"), 11, 10);
+    let factor = scene("factor");
+
+    let cases: [(&Path, &[&str], &[&str]); 5] = [
+        (
+            &truncated,
+            &[],
+            &["images_8/image001.png", "expected valid PNG data"],
+        ),
+        (
+            &missing,
+            &[],
+            &["images_8", "expected 4 images", "got 3 images"],
+        ),
+        (
+            &shape,
+            &[],
+            &["poses_bounds.npy", "expected 'shape': (N, 17)", "(4, 15)"],
+        ),
+        (&sizes, &[], &["images_8/image002.png", "12×10, got 11×10"]),
+        (
+            &factor,
+            &["data.factor=4"],
+            &[
+                "images_4",
+                "expected a folder of 4 images",
+                "no such folder",
+            ],
+        ),
+    ];
+    for (dir, sets, expected) in cases {
+        let out_dir = dir.join("run");
+        let data_path = format!("data.path={}", dir.display());
+        let mut args = vec![
+            "run",
+            config.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--force",
+            "-q",
+            "--set",
+            &data_path,
+        ];
+        for s in sets {
+            args.extend(["--set", s]);
+        }
+        let out = cpose_in(&workspace_root(), &args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{}: succeeded", dir.display());
+        assert_eq!(err.lines().count(), 1, "one line: {err}");
+        for e in expected {
+            assert!(err.contains(e), "{e:?} not in {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out_dir.join("metrics.json").exists(), "{err}");
+    }
+}
