@@ -207,6 +207,8 @@ struct TrainConfig {
     spline_frames_per_control: f64,
     /// Checkpoint every this many steps (0: never).
     checkpoint_every: usize,
+    /// Log the mean loss and the pose errors every this many steps (0: never).
+    log_every: usize,
 }
 
 impl Default for TrainConfig {
@@ -224,6 +226,7 @@ impl Default for TrainConfig {
             lr_pose: [1e-3, 1e-5],
             spline_frames_per_control: 5.0,
             checkpoint_every: 1000,
+            log_every: 500,
         }
     }
 }
@@ -675,9 +678,23 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 iterations,
                 train.checkpoint_every,
                 &checkpoint,
-                |it, loss| {
+                |it, loss, trainer| {
                     recent[it % recent.len()] = loss;
                     progress.inc(1);
+                    if train.log_every > 0 && (it + 1) % train.log_every == 0 {
+                        let n = (it + 1).min(recent.len());
+                        let loss = recent.iter().take(n).sum::<f64>() / n as f64;
+                        let errors =
+                            barf_pose_errors(&views.train_truth, trainer.poses().current())?;
+                        input.run_dir.log(format_args!(
+                            "{} {}/{iterations}: loss {loss:.5}, rotation {:.3}°, translation {:.4}",
+                            method.key(),
+                            it + 1,
+                            errors.rot_err_deg,
+                            errors.trans_err,
+                        ));
+                    }
+                    Ok(())
                 },
             )?;
         }
@@ -726,7 +743,7 @@ fn train_steps(
     iterations: usize,
     checkpoint_every: usize,
     checkpoint: &Path,
-    mut on_loss: impl FnMut(usize, f64),
+    mut on_loss: impl FnMut(usize, f64, &Trainer<'_>) -> anyhow::Result<()>,
 ) -> anyhow::Result<()> {
     let stopped = |trainer: &Trainer<'_>| {
         let last = match trainer.last_checkpoint() {
@@ -743,7 +760,7 @@ fn train_steps(
     };
     for it in 0..iterations {
         let loss = trainer.step(it as u64).with_context(|| stopped(trainer))?;
-        on_loss(it, loss);
+        on_loss(it, loss, trainer)?;
         if checkpoint_every > 0 && (it + 1) % checkpoint_every == 0 {
             trainer
                 .save_checkpoint(checkpoint, it as u64 + 1)
@@ -969,7 +986,10 @@ mod tests {
             8,
             every,
             &checkpoint,
-            |it, loss| losses.push((it, loss)),
+            |it, loss, _| {
+                losses.push((it, loss));
+                Ok(())
+            },
         )
         .unwrap_err();
         assert_eq!(losses.len(), poison_at, "{losses:?}");

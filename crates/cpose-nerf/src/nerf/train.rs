@@ -119,6 +119,11 @@ impl<'a> Trainer<'a> {
         })
     }
 
+    /// The poses being optimised.
+    pub fn poses(&self) -> &FramePoses {
+        self.poses
+    }
+
     /// One step at iteration `it`; returns the loss (mean squared error) before the step.
     pub fn step(&mut self, it: u64) -> anyhow::Result<f64> {
         let progress = it as f64 / self.schedule.iterations.max(1) as f64;
