@@ -19,7 +19,7 @@ use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{HashGridConfig, NerfMlpConfig, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::Image;
 use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
-use cpose_nerf::nerf::render::RenderSettings;
+use cpose_nerf::nerf::render::{Clip, RenderSettings};
 use cpose_nerf::nerf::train::{Schedule, Trainer};
 use cpose_nerf::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
 use cpose_nerf::volume::Sampling;
@@ -110,6 +110,11 @@ fn nerf_step(c: &mut Criterion) {
                 far: 6.0,
             },
             background: Some([1.0; 3]),
+            // As the task: samples on the chord through the scene's bounding sphere.
+            clip: Some(Clip {
+                centre: views.bounds.centre,
+                radius: views.bounds.radius,
+            }),
         };
         let schedule = Schedule {
             iterations: ITERATIONS,

@@ -65,7 +65,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::field_common::{Invalid, grow, invalid};
 
-pub use grid::{GRID_DENSITY_BIAS, HashGridConfig, HashGridField};
+pub use grid::{GRID_DENSITY_BIAS, HashGridConfig, HashGridField, Interpolation};
 pub use mlp::{NerfMlpConfig, NerfMlpField};
 
 /// A 3-D radiance field: world point → density `σ ≥ 0` and colour `rgb ∈ (0, 1)³`.

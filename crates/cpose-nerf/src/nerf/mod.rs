@@ -51,7 +51,7 @@ use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
 use crate::volume::Sampling;
 use eval::Refinement;
 use poses::{FramePoses, PoseSchedules};
-use render::{RenderSettings, Renderer, render_view};
+use render::{Clip, RenderSettings, Renderer, render_view};
 use train::{Schedule, Trainer};
 
 inventory::submit! {
@@ -152,6 +152,8 @@ struct RenderConfig {
     sampling: Option<String>,
     /// Background colour (white for object scenes; none for LLFF).
     background: Option<[f32; 3]>,
+    /// Bounded scenes: sample only the chord through the bounding sphere, empty outside.
+    clip: bool,
 }
 
 impl Default for RenderConfig {
@@ -162,6 +164,7 @@ impl Default for RenderConfig {
             far: None,
             sampling: None,
             background: None,
+            clip: true,
         }
     }
 }
@@ -285,6 +288,7 @@ struct Views {
 fn resolve_settings(
     render: &RenderConfig,
     default: (Sampling, Option<[f32; 3]>),
+    bounds: &SceneBounds,
 ) -> anyhow::Result<RenderSettings> {
     let (default_sampling, default_bg) = default;
     let (dn, df) = match default_sampling {
@@ -312,6 +316,10 @@ fn resolve_settings(
         samples: render.samples,
         sampling,
         background: render.background.or(default_bg),
+        clip: (render.clip && !bounds.unbounded).then_some(Clip {
+            centre: bounds.centre,
+            radius: bounds.radius,
+        }),
     })
 }
 
@@ -343,7 +351,11 @@ fn synthetic_views(exp: &Experiment) -> anyhow::Result<Views> {
         .map(|k| times[((2 * k + 1) * (n - 1)) / (2 * d.test_views.max(1))] + 0.5)
         .collect();
     let (test_images, test_truth) = test_times.iter().map(render).unzip();
-    let radius = scene.bounding_radius();
+    let bounds = SceneBounds {
+        centre: [0.0; 3],
+        radius: scene.bounding_radius(),
+        unbounded: false,
+    };
     let settings = resolve_settings(
         &exp.render,
         (
@@ -353,6 +365,7 @@ fn synthetic_views(exp: &Experiment) -> anyhow::Result<Views> {
             },
             Some([1.0; 3]),
         ),
+        &bounds,
     )?;
     Ok(Views {
         condition: "synthetic".to_owned(),
@@ -363,11 +376,7 @@ fn synthetic_views(exp: &Experiment) -> anyhow::Result<Views> {
         test_images,
         test_truth,
         settings,
-        bounds: SceneBounds {
-            centre: [0.0; 3],
-            radius,
-            unbounded: false,
-        },
+        bounds,
         diameter: exp.orbit.diameter(),
     })
 }
@@ -483,6 +492,19 @@ fn dataset_views(exp: &Experiment) -> anyhow::Result<Views> {
         .iter()
         .map(|c| (c - mean).norm())
         .fold(0.0, f64::max);
+    let bounds = if unbounded {
+        SceneBounds {
+            centre: [0.0, 0.0, 2.0],
+            radius: 2.0,
+            unbounded: true,
+        }
+    } else {
+        SceneBounds {
+            centre: [0.0; 3],
+            radius: 1.5,
+            unbounded: false,
+        }
+    };
     let condition = format!(
         "{}{}",
         path.file_name()
@@ -501,20 +523,8 @@ fn dataset_views(exp: &Experiment) -> anyhow::Result<Views> {
         train_truth: keep.iter().map(|&i| dataset.world_from_camera[i]).collect(),
         test_images: dataset.images[split..].to_vec(),
         test_truth: dataset.world_from_camera[split..].to_vec(),
-        settings: resolve_settings(&exp.render, settings_default)?,
-        bounds: if unbounded {
-            SceneBounds {
-                centre: [0.0, 0.0, 2.0],
-                radius: 2.0,
-                unbounded: true,
-            }
-        } else {
-            SceneBounds {
-                centre: [0.0; 3],
-                radius: 1.5,
-                unbounded: false,
-            }
-        },
+        settings: resolve_settings(&exp.render, settings_default, &bounds)?,
+        bounds,
         diameter: 2.0 * spread.max(1e-9),
     })
 }

@@ -30,6 +30,80 @@ pub struct RenderSettings {
     pub sampling: Sampling,
     /// Colour behind the scene (`None`: black, BARF's `setbg_opaque: false`).
     pub background: Option<[f32; 3]>,
+    /// The scene is empty outside this sphere: metric samples are spread over the ray's chord
+    /// through it instead of all of `[near, far]`, and points outside have `σ = 0` ([`Clip`]).
+    pub clip: Option<Clip>,
+}
+
+impl RenderSettings {
+    /// The clip sphere and `[near, far]` when they apply (metric sampling only).
+    fn metric_clip(&self) -> Option<(Clip, f64, f64)> {
+        match self.sampling {
+            Sampling::Metric { near, far } => self.clip.map(|c| (c, near, far)),
+            Sampling::InverseDepth { .. } => None,
+        }
+    }
+}
+
+/// A sphere outside which the scene is empty (a bounded scene's bounding sphere).
+///
+/// With metric sampling, the `N` samples of the ray `o + s d` cover `[a, b']`, where
+/// `[a, b] = [near, far] ∩ {s : ‖o + s d − c‖ ≤ r}` and `b' = (N b − a)/(N − 1)`: the first
+/// `N − 1` strata tile the chord and the last lies beyond it, where `σ = 0` closes the ray in
+/// place of BARF's 10¹⁰-long last interval. Rays that miss the sphere see only the background.
+/// The interval ends move with the camera but are constants for the gradient (stop-gradient,
+/// as every stratified sampler treats its depths); the `σ = 0` outside is exact.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Clip {
+    /// Centre `c`.
+    pub centre: [f64; 3],
+    /// Radius `r`.
+    pub radius: f64,
+}
+
+impl Clip {
+    /// `[a, b']` of the ray `o + s d` with `samples ≥ 2` strata over `[near, far]` (type docs),
+    /// or `None` when the ray misses the sphere inside `[near, far]`.
+    pub fn interval(
+        &self,
+        o: [f64; 3],
+        d: [f64; 3],
+        near: f64,
+        far: f64,
+        samples: usize,
+    ) -> Option<(f64, f64)> {
+        let (o, d, c) = (
+            Vector3::from(o),
+            Vector3::from(d),
+            Vector3::from(self.centre),
+        );
+        // ‖o − c + s d‖² = r²: A s² + 2 B s + C = 0.
+        let oc = o - c;
+        let (a2, b, c2) = (
+            d.norm_squared(),
+            d.dot(&oc),
+            oc.norm_squared() - self.radius.powi(2),
+        );
+        let disc = b * b - a2 * c2;
+        if disc <= 0.0 || a2 == 0.0 {
+            return None;
+        }
+        let root = disc.sqrt();
+        let (enter, exit) = ((-b - root) / a2, (-b + root) / a2);
+        let (a, b) = (enter.max(near), exit.min(far));
+        if a >= b {
+            return None;
+        }
+        let k = samples.max(2) as f64;
+        Some((a, (k * b - a) / (k - 1.0)))
+    }
+
+    fn contains<S: Real>(&self, p: &[S]) -> bool {
+        let d2: f64 = (0..3)
+            .map(|c| (p[c].to_f64() - self.centre[c]).powi(2))
+            .sum();
+        d2 <= self.radius * self.radius
+    }
 }
 
 /// One ray of a batch: which camera, its camera-frame direction and its world origin and
@@ -98,15 +172,24 @@ impl<S: Real> Renderer<S> {
         }
         let points = grow(&mut self.points, 3 * n * k);
         let norms = grow(&mut self.norms, n);
+        let clip = settings.metric_clip();
         points
             .par_chunks_mut(3 * k * CHUNK)
-            .zip(depths.par_chunks(k * CHUNK))
+            .zip(depths.par_chunks_mut(k * CHUNK))
             .zip(norms.par_chunks_mut(CHUNK))
             .zip(rays.par_chunks(CHUNK))
             .for_each(|(((pts, ds), ns), rs)| {
                 for (r, ray) in rs.iter().enumerate() {
                     let (o, d) = (ray.origin, ray.direction);
                     ns[r] = S::from_f64(Vector3::from(d).norm());
+                    if let Some((clip, near, far)) = clip {
+                        // Map [near, far] onto the chord [a, b'] (a miss keeps [near, far],
+                        // all outside the sphere, so empty).
+                        let (a, b) = clip.interval(o, d, near, far, k).unwrap_or((near, far));
+                        for s in &mut ds[r * k..(r + 1) * k] {
+                            *s = S::from_f64(a + (s.to_f64() - near) / (far - near) * (b - a));
+                        }
+                    }
                     for j in 0..k {
                         let s = ds[r * k + j].to_f64();
                         for c in 0..3 {
@@ -118,6 +201,13 @@ impl<S: Real> Renderer<S> {
         let sigma = grow(&mut self.sigma, n * k);
         let rgb = grow(&mut self.rgb, 3 * n * k);
         field.forward(points, sigma, rgb);
+        if let Some((clip, ..)) = clip {
+            for (s, p) in sigma.iter_mut().zip(points.chunks_exact(3)) {
+                if !clip.contains(p) {
+                    *s = S::ZERO;
+                }
+            }
+        }
         let out = grow(&mut self.out, n);
         out.par_chunks_mut(CHUNK).enumerate().for_each(|(c, out)| {
             let (a, b) = (c * CHUNK * k, (c * CHUNK + out.len()) * k);
@@ -180,6 +270,13 @@ impl<S: Real> Renderer<S> {
                     gc,
                 );
             });
+        if let Some((clip, ..)) = settings.metric_clip() {
+            for (g, p) in grad_sigma.iter_mut().zip(self.points.chunks_exact(3)) {
+                if !clip.contains(p) {
+                    *g = S::ZERO;
+                }
+            }
+        }
         let grad_points = grow(&mut self.grad_points, 3 * n * k);
         field.backward(grad_sigma, grad_rgb, grad_params, grad_points);
         let Some(pose_grads) = pose_grads else {
@@ -290,6 +387,72 @@ mod tests {
         field
     }
 
+    /// The chord through the clip sphere, cut by `[near, far]`, with one stratum beyond it.
+    #[test]
+    fn clip_interval_is_the_chord_plus_one_stratum() {
+        let clip = Clip {
+            centre: [0.0, 1.0, 0.0],
+            radius: 1.0,
+        };
+        // Along z through the centre: enters at s = 3, leaves at 5; b' = (8·5 − 3)/7.
+        let (a, b) = clip
+            .interval([0.0, 1.0, -4.0], [0.0, 0.0, 1.0], 2.0, 6.0, 8)
+            .expect("hits");
+        assert!((a - 3.0).abs() < 1e-12 && (b - 37.0 / 7.0).abs() < 1e-12);
+        // Seven strata of (b − a)/8 end exactly at the exit.
+        assert!((a + 7.0 * (b - a) / 8.0 - 5.0).abs() < 1e-12);
+        // A non-unit direction measures s in its own units; near cuts the chord.
+        let (a, _) = clip
+            .interval([0.0, 1.0, -1.5], [0.0, 0.0, 0.5], 2.0, 6.0, 8)
+            .expect("hits");
+        assert!((a - 2.0).abs() < 1e-12);
+        // Misses: beside the sphere, or the sphere beyond far.
+        assert_eq!(
+            clip.interval([0.0, 2.5, -4.0], [0.0, 0.0, 1.0], 2.0, 6.0, 8),
+            None
+        );
+        assert_eq!(
+            clip.interval([0.0, 1.0, -9.0], [0.0, 0.0, 1.0], 2.0, 6.0, 8),
+            None
+        );
+    }
+
+    /// With a clip sphere a ray that misses it is the background exactly, and a ray through
+    /// it samples inside the sphere except for its last sample, beyond the exit.
+    #[test]
+    fn clipped_rays_sample_inside_the_sphere() {
+        let mut field = field();
+        let settings = RenderSettings {
+            samples: 16,
+            sampling: Sampling::Metric {
+                near: 2.0,
+                far: 6.0,
+            },
+            background: Some([1.0, 0.9, 0.8]),
+            clip: Some(Clip {
+                centre: [0.0; 3],
+                radius: 1.0,
+            }),
+        };
+        let pose = Isometry3::translation(0.0, 0.0, -4.0);
+        let rays = [
+            CameraRay::new(0, &pose, [0.05, -0.1, 1.0]),
+            CameraRay::new(0, &pose, [0.5, 0.0, 1.0]),
+        ];
+        let mut renderer = Renderer::<f64>::default();
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let out = renderer.forward(&mut field, &settings, &rays, Some(&mut rng))[..2].to_vec();
+        assert!(out[0].opacity > 0.0);
+        let bg = [1.0f32, 0.9, 0.8].map(f64::from);
+        assert_eq!(out[1].rgb, bg);
+        assert_eq!(out[1].opacity, 0.0);
+        let inside: Vec<bool> = renderer.points[..3 * 16]
+            .chunks(3)
+            .map(|p| p.iter().map(|v| v * v).sum::<f64>() <= 1.0)
+            .collect();
+        assert!(inside[..15].iter().all(|&i| i) && !inside[15], "{inside:?}");
+    }
+
     /// `Σ_r a_r·C_r + b_r D_r + c_r A_r` of the rays through `pixels` of a camera at `pose`, and
     /// the pose gradient of the right perturbation.
     fn loss(
@@ -305,6 +468,7 @@ mod tests {
                 far: 6.0,
             },
             background: Some([1.0, 0.9, 0.8]),
+            clip: None,
         };
         let rays: Vec<CameraRay> = [(3, 4), (20, 15), (35, 27), (11, 22), (28, 6)]
             .iter()

@@ -330,6 +330,7 @@ pub(super) mod tests {
                     far: 6.0,
                 },
                 background: Some([1.0; 3]),
+                clip: None,
             };
             let schedule = Schedule {
                 iterations,
