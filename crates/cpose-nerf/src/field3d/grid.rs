@@ -52,8 +52,8 @@ pub struct HashGridConfig {
     /// Hidden ReLU layers of the MLP (≥ 1); default 2.
     pub hidden_layers: usize,
     /// Coarse-to-fine window `[start, end]` in fractions of training, `0 ≤ start < end ≤ 1`,
-    /// over the levels; `false` in TOML (`None`) weights every level 1. Default `[0.1, 0.5]`
-    /// (BARF's NeRF window).
+    /// over the levels after the coarsest (always on); `false` in TOML (`None`) weights every
+    /// level 1. Default `[0.1, 0.5]` (BARF's NeRF window).
     #[serde(with = "c2f_serde")]
     pub c2f: Option<[f64; 2]>,
     /// Grid values start as `U(±init_scale)`; default 1e-4 (instant-NGP).
@@ -187,7 +187,9 @@ impl HashGridConfig {
             resolutions: levels.iter().map(|l| l.resolution as usize).collect(),
             levels,
             grid_len,
-            weights: vec![0.0; self.levels],
+            weights: std::iter::once(1.0)
+                .chain(std::iter::repeat_n(0.0, self.levels - 1))
+                .collect(),
             params,
             mlp,
             ws: Workspace::default(),
@@ -740,8 +742,11 @@ impl<S: Real> RadianceField<S> for HashGridField<S> {
         vec![("grid", self.grid_range()), ("mlp", self.mlp_range())]
     }
 
+    /// The coarsest level is always on (as BARF's raw coordinates beside its encoding), so
+    /// the field depends on position from the first step; the window opens the others.
     fn set_progress(&mut self, progress: f64) {
-        coarse_to_fine_weights(progress, self.config.c2f, &mut self.weights);
+        self.weights[0] = 1.0;
+        coarse_to_fine_weights(progress, self.config.c2f, &mut self.weights[1..]);
     }
 
     fn forward(&mut self, points: &[S], sigma: &mut [S], rgb: &mut [S]) {
@@ -904,7 +909,8 @@ mod tests {
 
     /// Grid values (those under the test points on every level, both features, and a random
     /// sample) and MLP parameters, and points, against central differences at progress 0.3
-    /// (`α = 0.625 · 4 = 2.5`, weights `[1, 1, 0.5, 0]`) and with all levels on; bounded
+    /// (level 0 always on, `α = 0.625 · 3 = 1.875` over the others: weights
+    /// `[1, 1, (1 − cos 0.875π)/2, 0]`) and with all levels on; bounded
     /// (with points beyond the cube, clamped) and contracted (points out to 4 radii); linear
     /// and smoothstep interpolation.
     #[test]
@@ -927,7 +933,12 @@ mod tests {
             .expect("valid");
             field.set_progress(progress);
             if c2f.is_some() {
-                let want = [1.0, 1.0, 0.5, 0.0];
+                let want = [
+                    1.0,
+                    1.0,
+                    (1.0 - (0.875 * std::f64::consts::PI).cos()) / 2.0,
+                    0.0,
+                ];
                 let w = field.level_weights();
                 assert!(
                     w.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-12),
@@ -1057,7 +1068,7 @@ mod tests {
             (0..4).map(|l| field.is_hashed(l)).collect::<Vec<_>>(),
             [false, false, false, true]
         );
-        assert!(field.level_weights().iter().all(|&w| w == 0.0));
+        assert_eq!(field.level_weights(), [1.0, 0.0, 0.0, 0.0]);
         field.set_progress(1.0);
         assert!(field.level_weights().iter().all(|&w| w == 1.0));
         randomise_grid(&mut field, 3);
