@@ -2,7 +2,7 @@
 //! backward, Adam on the field and on the poses), in rays per second, at the task's synthetic
 //! defaults: 100 frames of 100×100 of the built-in scene along the monocular orbit, initial
 //! poses with the default time-correlated noise, PoseNet's correction, `rays_per_step = 1024`
-//! × 64 samples. The trainer draws the same `⌊1024 / 100⌋ = 10` pixels in every frame, so a step
+//! × 64 samples on the chord through the scene's bounding sphere. The trainer draws the same `⌊1024 / 100⌋ = 10` pixels in every frame, so a step
 //! renders 1000 rays, the throughput's unit.
 //! Fields: the hash grid at its default config (the baseline) and the NeRF MLP at a reduced
 //! 4 × 128 (BARF's 8 × 256 takes seconds per step). Every step runs at iteration 3000 of 6000

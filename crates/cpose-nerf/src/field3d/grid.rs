@@ -187,9 +187,11 @@ impl HashGridConfig {
             resolutions: levels.iter().map(|l| l.resolution as usize).collect(),
             levels,
             grid_len,
-            weights: std::iter::once(1.0)
-                .chain(std::iter::repeat_n(0.0, self.levels - 1))
-                .collect(),
+            weights: {
+                let mut w = vec![0.0; self.levels];
+                level_weights(0.0, self.c2f, &mut w);
+                w
+            },
             params,
             mlp,
             ws: Workspace::default(),
@@ -322,6 +324,14 @@ impl Level {
             ]
         }
     }
+}
+
+/// The coarse-to-fine weight of every level at `progress`: the coarsest is always on (as BARF's
+/// raw coordinates beside its encoding), so the field depends on position from the first step;
+/// the window opens the others.
+fn level_weights(progress: f64, c2f: Option<[f64; 2]>, weights: &mut [f64]) {
+    weights[0] = 1.0;
+    coarse_to_fine_weights(progress, c2f, &mut weights[1..]);
 }
 
 /// Where a point falls on one level.
@@ -742,11 +752,8 @@ impl<S: Real> RadianceField<S> for HashGridField<S> {
         vec![("grid", self.grid_range()), ("mlp", self.mlp_range())]
     }
 
-    /// The coarsest level is always on (as BARF's raw coordinates beside its encoding), so
-    /// the field depends on position from the first step; the window opens the others.
     fn set_progress(&mut self, progress: f64) {
-        self.weights[0] = 1.0;
-        coarse_to_fine_weights(progress, self.config.c2f, &mut self.weights[1..]);
+        level_weights(progress, self.config.c2f, &mut self.weights);
     }
 
     fn forward(&mut self, points: &[S], sigma: &mut [S], rgb: &mut [S]) {
