@@ -31,6 +31,8 @@ use cpose_core::eval::{self, Alignment};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{RunDir, RunDirOptions};
 
+mod table;
+
 /// Continuous camera poses: run experiments, list tasks and pose fields.
 #[derive(Debug, Parser)]
 #[command(name = "cpose", version)]
@@ -48,6 +50,18 @@ enum Command {
     /// Evaluate trajectories.
     #[command(subcommand)]
     Eval(EvalCommand),
+    /// Print the metrics of run folders side by side as a Markdown table.
+    Table(TableArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct TableArgs {
+    /// Run folders, each with a `metrics.json`.
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// Only these metrics, in this order (comma-separated), e.g. `rot_err_deg,psnr_db`.
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    metrics: Vec<String>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -118,6 +132,11 @@ where
         Command::List => list(),
         Command::Run(args) => run(&args),
         Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
+        Command::Table(args) => table::metrics_table(&args.runs, &args.metrics)
+            .map(|text| {
+                let _ = std::io::stdout().lock().write_all(text.as_bytes());
+            })
+            .map_err(Failure::Usage),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

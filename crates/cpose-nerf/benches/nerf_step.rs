@@ -2,8 +2,9 @@
 //! backward, Adam on the field and on the poses), in rays per second, at the task's synthetic
 //! defaults: 100 frames of 100×100 of the built-in scene along the monocular orbit, initial
 //! poses with the default time-correlated noise, PoseNet's correction, `rays_per_step = 1024`
-//! × 64 samples on the chord through the scene's bounding sphere. The trainer draws the same `⌊1024 / 100⌋ = 10` pixels in every frame, so a step
-//! renders 1000 rays, the throughput's unit.
+//! × 48 samples on the chord through the scene's bounding sphere (`configs/nerf_synthetic.toml`).
+//! The trainer draws the same `⌊1024 / 100⌋ = 10` pixels in every frame, so a step renders 1000
+//! rays, the throughput's unit.
 //! Fields: the hash grid at its default config (the baseline) and the NeRF MLP at a reduced
 //! 4 × 128 (BARF's 8 × 256 takes seconds per step). Every step runs at iteration 3000 of 6000
 //! (progress ½: all grid levels and all MLP bands on), so each measured step does the same work.
@@ -101,10 +102,11 @@ fn nerf_step(c: &mut Criterion) {
                 rotation: decay([2e-4, 1e-6]),
                 translation: decay([1e-3, 1e-5]),
                 pose: decay([1e-3, 1e-5]),
+                warmup: 600,
             },
         );
         let settings = RenderSettings {
-            samples: 64,
+            samples: 48,
             sampling: Sampling::Metric {
                 near: 2.0,
                 far: 6.0,

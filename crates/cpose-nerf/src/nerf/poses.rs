@@ -30,6 +30,20 @@ pub struct PoseSchedules {
     pub translation: ExponentialDecay,
     /// Parameters that move both (per-frame se(3), spline control poses).
     pub pose: ExponentialDecay,
+    /// Steps over which every rate ramps up linearly from 0 (0: none). While the field is
+    /// still blank its pose gradients are noise, which moves even true poses by degrees.
+    pub warmup: u64,
+}
+
+impl PoseSchedules {
+    /// The factor of the warm-up at iteration `it`: `min(1, (it + 1) / warmup)`.
+    pub fn warmup_factor(&self, it: u64) -> f64 {
+        if self.warmup == 0 {
+            1.0
+        } else {
+            ((it + 1) as f64 / self.warmup as f64).min(1.0)
+        }
+    }
 }
 
 /// Per-frame poses `init_i ∘ C(t_i)` and their optimiser.
@@ -122,12 +136,14 @@ impl FramePoses {
         self.grad.fill(0.0);
         c.backward(&self.times, &self.cotangent, &mut self.grad)?;
         let s = self.schedules;
-        self.adam
-            .step_pose_field(c.as_mut(), &self.grad, |kind| match kind {
+        let ramp = s.warmup_factor(it);
+        self.adam.step_pose_field(c.as_mut(), &self.grad, |kind| {
+            ramp * match kind {
                 ParamKind::Rotation => s.rotation.lr(it),
                 ParamKind::Translation => s.translation.lr(it),
                 ParamKind::Pose => s.pose.lr(it),
-            });
+            }
+        });
         Ok(())
     }
 
@@ -174,6 +190,25 @@ mod tests {
         let gq = a * q.coords.dot(&a).cos() + q.coords * (2.0 * t.x);
         let gt = Vector3::new(q.coords.norm_squared() - 0.5, t.z, t.y);
         (Quaternion::from(gq), gt)
+    }
+
+    #[test]
+    fn warmup_ramps_linearly_to_one() {
+        let decay = ExponentialDecay {
+            lr0: 1e-3,
+            lr_end: 1e-5,
+            max_iter: 100,
+        };
+        let mut s = PoseSchedules {
+            rotation: decay,
+            translation: decay,
+            pose: decay,
+            warmup: 4,
+        };
+        let factors: Vec<f64> = (0..6).map(|it| s.warmup_factor(it)).collect();
+        assert_eq!(factors, [0.25, 0.5, 0.75, 1.0, 1.0, 1.0]);
+        s.warmup = 0;
+        assert_eq!(s.warmup_factor(0), 1.0);
     }
 
     /// The loss of `(q_c, t_c) ∘ init` with the composition written on raw quaternions,

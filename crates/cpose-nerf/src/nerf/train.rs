@@ -314,6 +314,7 @@ pub(super) mod tests {
                         rotation: decay(1e-3),
                         translation: decay(1e-3),
                         pose: decay(1e-3),
+                        warmup: 0,
                     },
                 ),
                 images,

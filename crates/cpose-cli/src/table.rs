@@ -1,0 +1,169 @@
+//! `cpose table RUN_DIR...`: the numbers of several runs' `metrics.json` side by side, as one
+//! Markdown table (a sweep's summary).
+//!
+//! Every numeric leaf of a `metrics.json` is a cell: its last key names the column, the keys
+//! before it (with the run folder's name in front) name the row. So the NeRF task's
+//! `{"synthetic": {"posenet": {"rot_err_deg": 0.3}}}` in `runs/rm60` is the cell
+//! (`rm60 synthetic/posenet`, `rot_err_deg`).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use serde_json::Value;
+
+/// One row: its name and its cells by column.
+type Row = (String, BTreeMap<String, f64>);
+
+/// The Markdown table of the runs in `dirs`, restricted to `columns` (in that order) when not
+/// empty, else all columns sorted by name.
+pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<String> {
+    let mut rows: Vec<Row> = Vec::new();
+    for dir in dirs {
+        let path = dir.join("metrics.json");
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!(
+                "cannot read {} (a run folder holds one when its run finished)",
+                path.display()
+            )
+        })?;
+        let value: Value = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not valid JSON", path.display()))?;
+        let run = dir
+            .file_name()
+            .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into());
+        collect_rows(&value, &run, "", &mut rows);
+    }
+    let names: Vec<String> = if columns.is_empty() {
+        let mut all: Vec<String> = rows
+            .iter()
+            .flat_map(|(_, cells)| cells.keys().cloned())
+            .collect();
+        all.sort();
+        all.dedup();
+        all
+    } else {
+        for c in columns {
+            if !rows.iter().any(|(_, cells)| cells.contains_key(c)) {
+                let mut known: Vec<&String> = rows.iter().flat_map(|(_, c)| c.keys()).collect();
+                known.sort();
+                known.dedup();
+                bail!(
+                    "no run has the metric {c:?} (metrics: {})",
+                    known
+                        .iter()
+                        .map(|k| k.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+        }
+        columns.to_vec()
+    };
+    rows.retain(|(_, cells)| names.iter().any(|n| cells.contains_key(n)));
+    let mut out = format!("| run | {} |\n|---|", names.join(" | "));
+    out.push_str(&"---|".repeat(names.len()));
+    out.push('\n');
+    for (name, cells) in &rows {
+        out.push_str(&format!("| {name} |"));
+        for n in &names {
+            match cells.get(n) {
+                Some(v) => out.push_str(&format!(" {} |", format_number(*v))),
+                None => out.push_str(" |"),
+            }
+        }
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+/// Appends the rows of `value`, an object at key path `path` of run `run`: one row per object
+/// with numeric leaves, which are its cells.
+fn collect_rows(value: &Value, run: &str, path: &str, rows: &mut Vec<Row>) {
+    let Value::Object(map) = value else {
+        return;
+    };
+    let cells: BTreeMap<String, f64> = map
+        .iter()
+        .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
+        .collect();
+    if !cells.is_empty() {
+        let name = if path.is_empty() {
+            run.to_owned()
+        } else {
+            format!("{run} {path}")
+        };
+        rows.push((name, cells));
+    }
+    for (k, v) in map {
+        if v.is_object() {
+            let path = if path.is_empty() {
+                k.clone()
+            } else {
+                format!("{path}/{k}")
+            };
+            collect_rows(v, run, &path, rows);
+        }
+    }
+}
+
+/// Four significant digits, no exponent for ordinary magnitudes.
+fn format_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    let magnitude = v.abs().log10().floor() as i32;
+    if (-3..6).contains(&magnitude) {
+        let decimals = (3 - magnitude).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_are_paths_and_columns_are_last_keys() {
+        let dir = std::env::temp_dir().join(format!("cpose-table-{}", std::process::id()));
+        let (a, b) = (dir.join("rm30"), dir.join("rm60"));
+        for (d, rot) in [(&a, 0.25), (&b, 12.5)] {
+            std::fs::create_dir_all(d).unwrap();
+            std::fs::write(
+                d.join("metrics.json"),
+                format!(
+                    r#"{{"synthetic": {{"posenet": {{"rot_err_deg": {rot}, "psnr_db": 27.123456, "iterations": 2000}},
+                       "barf": {{"rot_err_deg": 30.0}}}}}}"#
+                ),
+            )
+            .unwrap();
+        }
+        let table = metrics_table(&[a, b.clone()], &[]).unwrap();
+        let expected = "\
+| run | iterations | psnr_db | rot_err_deg |
+|---|---|---|---|
+| rm30 synthetic/barf | | | 30.00 |
+| rm30 synthetic/posenet | 2000 | 27.12 | 0.2500 |
+| rm60 synthetic/barf | | | 30.00 |
+| rm60 synthetic/posenet | 2000 | 27.12 | 12.50 |
+";
+        assert_eq!(table, expected);
+        let chosen = metrics_table(std::slice::from_ref(&b), &["rot_err_deg".to_owned()]).unwrap();
+        assert!(chosen.starts_with("| run | rot_err_deg |\n"), "{chosen}");
+        let err = metrics_table(&[b], &["rot_err".to_owned()]).unwrap_err();
+        assert!(
+            format!("{err:#}").contains(
+                "no run has the metric \"rot_err\" (metrics: iterations, psnr_db, rot_err_deg)"
+            ),
+            "{err:#}"
+        );
+        let err = metrics_table(&[dir.join("missing")], &[]).unwrap_err();
+        assert!(
+            format!("{err:#}").contains("missing/metrics.json"),
+            "{err:#}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
