@@ -1,14 +1,15 @@
 #!/bin/sh
 # The paper's interpolated pose-noise grid (supplement, "Interpolated pose noise experiments"):
 # translation only (TM 10–40 % of the orbit diameter), rotation only (RM 30–120°) and both, on
-# configs/nerf_synthetic.toml, then one table of all runs.
+# configs/nerf_synthetic.toml with PoseNet and BARF, one run with the true poses (the PSNR
+# reference, the same for every case), then one table of all runs.
 #
 #   scripts/nerf_noise_sweep.sh [OUT_DIR] [--set key=value]...
 #
 # OUT_DIR defaults to runs/nerf-noise-sweep. Extra arguments go to every `cpose run` (e.g.
 # `--set train.iterations=3000`). A case whose folder already holds metrics.json is skipped, so
-# an interrupted sweep continues where it stopped. Twelve cases of three methods take hours on
-# two cores; the table is written to OUT_DIR/table.md.
+# an interrupted sweep continues where it stopped. Twelve cases of two methods take hours on two
+# cores; the table is written to OUT_DIR/table.md.
 set -eu
 
 out=${1:-runs/nerf-noise-sweep}
@@ -17,16 +18,21 @@ cpose=${CPOSE:-target/release/cpose}
 [ -x "$cpose" ] || cargo build --release -p cpose-cli
 mkdir -p "$out"
 
+run() {
+    [ -f "$out/$1/metrics.json" ] && return
+    name=$1
+    shift
+    "$cpose" run configs/nerf_synthetic.toml --out "$out/$name" --force --quiet "$@"
+}
+
+run true-poses --set 'train.methods=["true_poses"]' "$@"
 # name:max_rotation_deg:max_translation
 for case in tm10:0:0.1 tm20:0:0.2 tm30:0:0.3 tm40:0:0.4 \
     rm30:30:0 rm60:60:0 rm90:90:0 rm120:120:0 \
     rm30-tm10:30:0.1 rm60-tm20:60:0.2 rm90-tm30:90:0.3 rm120-tm40:120:0.4; do
-    name=${case%%:*}
     rest=${case#*:}
-    if [ ! -f "$out/$name/metrics.json" ]; then
-        "$cpose" run configs/nerf_synthetic.toml --out "$out/$name" --force --quiet \
-            --set noise.max_rotation_deg="${rest%%:*}" --set noise.max_translation="${rest#*:}" "$@"
-    fi
+    run "${case%%:*}" --set 'train.methods=["posenet","barf"]' \
+        --set noise.max_rotation_deg="${rest%%:*}" --set noise.max_translation="${rest#*:}" "$@"
 done
 
 "$cpose" table "$out"/*/ --metrics init_rot_err_deg,rot_err_deg,init_trans_err,trans_err,psnr_db,ssim,psnr_db_refined \

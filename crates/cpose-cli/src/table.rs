@@ -2,7 +2,8 @@
 //! Markdown table (a sweep's summary).
 //!
 //! Every numeric leaf of a `metrics.json` is a cell: its last key names the column, the keys
-//! before it (with the run folder's name in front) name the row. So the NeRF task's
+//! before it (with the run folder's name in front) name the row. A `null` leaf (a metric that
+//! was not computed) is an empty cell. So the NeRF task's
 //! `{"synthetic": {"posenet": {"rot_err_deg": 0.3}}}` in `runs/rm60` is the cell
 //! (`rm60 synthetic/posenet`, `rot_err_deg`).
 
@@ -12,8 +13,8 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use serde_json::Value;
 
-/// One row: its name and its cells by column.
-type Row = (String, BTreeMap<String, f64>);
+/// One row: its name and its cells by column (`None`: `null`).
+type Row = (String, BTreeMap<String, Option<f64>>);
 
 /// The Markdown table of the runs in `dirs`, restricted to `columns` (in that order) when not
 /// empty, else all columns sorted by name.
@@ -68,8 +69,8 @@ pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<Str
         out.push_str(&format!("| {name} |"));
         for n in &names {
             match cells.get(n) {
-                Some(v) => out.push_str(&format!(" {} |", format_number(*v))),
-                None => out.push_str(" |"),
+                Some(Some(v)) => out.push_str(&format!(" {} |", format_number(*v))),
+                _ => out.push_str(" |"),
             }
         }
         out.push('\n');
@@ -83,9 +84,12 @@ fn collect_rows(value: &Value, run: &str, path: &str, rows: &mut Vec<Row>) {
     let Value::Object(map) = value else {
         return;
     };
-    let cells: BTreeMap<String, f64> = map
+    let cells: BTreeMap<String, Option<f64>> = map
         .iter()
-        .filter_map(|(k, v)| v.as_f64().map(|x| (k.clone(), x)))
+        .filter_map(|(k, v)| match v {
+            Value::Null => Some((k.clone(), None)),
+            _ => v.as_f64().map(|x| (k.clone(), Some(x))),
+        })
         .collect();
     if !cells.is_empty() {
         let name = if path.is_empty() {
@@ -134,7 +138,7 @@ mod tests {
             std::fs::write(
                 d.join("metrics.json"),
                 format!(
-                    r#"{{"synthetic": {{"posenet": {{"rot_err_deg": {rot}, "psnr_db": 27.123456, "iterations": 2000}},
+                    r#"{{"synthetic": {{"posenet": {{"rot_err_deg": {rot}, "psnr_db": 27.123456, "iterations": 2000, "refined": null}},
                        "barf": {{"rot_err_deg": 30.0}}}}}}"#
                 ),
             )
@@ -142,12 +146,12 @@ mod tests {
         }
         let table = metrics_table(&[a, b.clone()], &[]).unwrap();
         let expected = "\
-| run | iterations | psnr_db | rot_err_deg |
-|---|---|---|---|
-| rm30 synthetic/barf | | | 30.00 |
-| rm30 synthetic/posenet | 2000 | 27.12 | 0.2500 |
-| rm60 synthetic/barf | | | 30.00 |
-| rm60 synthetic/posenet | 2000 | 27.12 | 12.50 |
+| run | iterations | psnr_db | refined | rot_err_deg |
+|---|---|---|---|---|
+| rm30 synthetic/barf | | | | 30.00 |
+| rm30 synthetic/posenet | 2000 | 27.12 | | 0.2500 |
+| rm60 synthetic/barf | | | | 30.00 |
+| rm60 synthetic/posenet | 2000 | 27.12 | | 12.50 |
 ";
         assert_eq!(table, expected);
         let chosen = metrics_table(std::slice::from_ref(&b), &["rot_err_deg".to_owned()]).unwrap();
@@ -155,7 +159,7 @@ mod tests {
         let err = metrics_table(&[b], &["rot_err".to_owned()]).unwrap_err();
         assert!(
             format!("{err:#}").contains(
-                "no run has the metric \"rot_err\" (metrics: iterations, psnr_db, rot_err_deg)"
+                "no run has the metric \"rot_err\" (metrics: iterations, psnr_db, refined, rot_err_deg)"
             ),
             "{err:#}"
         );
