@@ -46,7 +46,7 @@ impl PoseSchedules {
     }
 }
 
-/// Per-frame poses `init_i ∘ C(t_i)` and their optimiser.
+/// Per-frame poses `C(t_i) ∘ init_i` and their optimiser.
 pub struct FramePoses {
     init: Vec<Isometry3<f64>>,
     times: Vec<f64>,
@@ -60,7 +60,7 @@ pub struct FramePoses {
 }
 
 impl FramePoses {
-    /// Poses `init_i ∘ correction(t_i)`; `correction = None` keeps `init`.
+    /// Poses `correction(t_i) ∘ init_i`; `correction = None` keeps `init`.
     pub fn new(
         init: Vec<Isometry3<f64>>,
         times: Vec<f64>,
