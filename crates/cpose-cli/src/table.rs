@@ -7,7 +7,7 @@
 //! `{"synthetic": {"posenet": {"rot_err_deg": 0.3}}}` in `runs/rm60` is the cell
 //! (`rm60 synthetic/posenet`, `rot_err_deg`).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
@@ -35,30 +35,17 @@ pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<Str
             .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into());
         collect_rows(&value, &run, "", &mut rows);
     }
+    let all: BTreeSet<&String> = rows.iter().flat_map(|(_, cells)| cells.keys()).collect();
+    if let Some(c) = columns.iter().find(|c| !all.contains(c)) {
+        let known: Vec<&str> = all.iter().map(|k| k.as_str()).collect();
+        bail!(
+            "no run has the metric {c:?} (metrics: {})",
+            known.join(", ")
+        );
+    }
     let names: Vec<String> = if columns.is_empty() {
-        let mut all: Vec<String> = rows
-            .iter()
-            .flat_map(|(_, cells)| cells.keys().cloned())
-            .collect();
-        all.sort();
-        all.dedup();
-        all
+        all.into_iter().cloned().collect()
     } else {
-        for c in columns {
-            if !rows.iter().any(|(_, cells)| cells.contains_key(c)) {
-                let mut known: Vec<&String> = rows.iter().flat_map(|(_, c)| c.keys()).collect();
-                known.sort();
-                known.dedup();
-                bail!(
-                    "no run has the metric {c:?} (metrics: {})",
-                    known
-                        .iter()
-                        .map(|k| k.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-            }
-        }
         columns.to_vec()
     };
     rows.retain(|(_, cells)| names.iter().any(|n| cells.contains_key(n)));
