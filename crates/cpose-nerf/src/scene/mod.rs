@@ -30,7 +30,7 @@ pub mod noise;
 pub mod orbit;
 pub mod primitives;
 
-pub use noise::PoseNoise;
+pub use noise::{AnchorDraws, PoseNoise};
 pub use orbit::{MonocularOrbit, look_at};
 pub use primitives::{Shape, Texture};
 

@@ -2,7 +2,9 @@
 //!
 //! * [`PoseNoise::TimeCorrelated`] — the paper's (supplement, "Implementation details"):
 //!   rotation and translation perturbed separately, drawn at a subset of frames (anchors) and
-//!   interpolated between them, so that the maximal deviation is set exactly.
+//!   interpolated between them, so that the maximal deviation is set exactly. By default the
+//!   anchors drift — the error accumulates with time, "due to drift and error accumulation" as
+//!   the supplement motivates it ([`AnchorDraws`]).
 //! * [`PoseNoise::Iid`] — BARF's: an independent se(3) draw per frame.
 //! * [`PoseNoise::Identity`] — unknown poses (the LLFF protocol): every initial pose is the
 //!   identity.
@@ -24,11 +26,14 @@ use super::SceneError;
 #[serde(tag = "kind", deny_unknown_fields)]
 pub enum PoseNoise {
     /// Anchors at frames `0, M, 2M, …` and always the last frame (`M = anchor_every`; a last
-    /// gap shorter than `M / 2` is merged into the previous segment). At each
-    /// anchor `k` draw a rotation `R_k` (axis uniform on the sphere, angle `u · max`, `u ~ U(0,
-    /// 1)`) and a centre displacement `Δc_k` (direction uniform, length `u' · max_translation ·
-    /// diameter`); rescale all angles by one factor so that the largest is `max_rotation_deg`,
-    /// and all lengths so that the largest is `max_translation · diameter`. Between anchors
+    /// gap shorter than `M / 2` is merged into the previous segment). Per anchor draw a rotation
+    /// vector `r` (axis uniform on the sphere, angle `u`, `u ~ U(0, 1)`) and a centre
+    /// displacement `d` (direction uniform, length `u' ~ U(0, 1)`); with
+    /// [`AnchorDraws::Drift`] anchor `k` carries the sums of the draws of anchors `1..=k`
+    /// (anchor 0 is exact), with [`AnchorDraws::Independent`] its own draw. All rotation
+    /// vectors are then scaled by one factor so that the largest angle is `max_rotation_deg`,
+    /// all displacements so that the largest is `max_translation · diameter`; `R_k = Exp(r_k)`,
+    /// `Δc_k = d_k`. Between anchors
     /// `R_δ` is the slerp and `Δc` the linear interpolation in the frame index. The noise acts
     /// in world coordinates, as BARF's and the paper's (`T_init = T_{c,w} ∘ T_noise`):
     /// `world_from_camera_init = (R_δ, Δc) ∘ world_from_camera_gt`, i.e. `R_init = R_δ R_gt`,
@@ -45,6 +50,10 @@ pub enum PoseNoise {
         /// Frames between anchors (≥ 1; 1 perturbs every frame independently).
         #[serde(default = "default_anchor_every")]
         anchor_every: usize,
+        /// Whether the anchors' perturbations accumulate (`"drift"`) or are drawn apart
+        /// (`"independent"`).
+        #[serde(default)]
+        anchors: AnchorDraws,
         /// Seed of the draw.
         #[serde(default)]
         seed: u64,
@@ -74,6 +83,19 @@ pub enum PoseNoise {
     None {},
 }
 
+/// How the anchors of [`PoseNoise::TimeCorrelated`] relate to each other.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AnchorDraws {
+    /// A random walk from the true pose of frame 0: the error grows with time, as an odometry's
+    /// does. Neighbouring anchors share most of their perturbation.
+    #[default]
+    Drift,
+    /// Every anchor is perturbed on its own, so neighbouring anchors may err in opposite
+    /// directions (a harsher test than the paper's).
+    Independent,
+}
+
 fn default_max_rotation_deg() -> f64 {
     60.0
 }
@@ -95,6 +117,7 @@ impl Default for PoseNoise {
             max_rotation_deg: default_max_rotation_deg(),
             max_translation: default_max_translation(),
             anchor_every: default_anchor_every(),
+            anchors: AnchorDraws::default(),
             seed: 0,
         }
     }
@@ -160,6 +183,7 @@ impl PoseNoise {
                 max_rotation_deg,
                 max_translation,
                 anchor_every,
+                anchors,
                 seed,
             } => {
                 let (rotations, shifts) = time_correlated_perturbations(
@@ -167,6 +191,7 @@ impl PoseNoise {
                     max_rotation_deg.to_radians(),
                     max_translation * diameter,
                     anchor_every,
+                    anchors,
                     seed,
                 );
                 gt.iter()
@@ -191,18 +216,6 @@ impl PoseNoise {
     }
 }
 
-/// The perturbation drawn at one anchor, in drawing order.
-struct AnchorDraw {
-    /// Rotation axis.
-    axis: Unit<Vector3<f64>>,
-    /// Rotation angle, radians.
-    angle: f64,
-    /// Direction of the centre displacement.
-    direction: Unit<Vector3<f64>>,
-    /// Length of the centre displacement.
-    length: f64,
-}
-
 /// The rotation perturbations `R_δ` and centre displacements `Δc` of `n` frames for
 /// [`PoseNoise::TimeCorrelated`] (`max_angle` in radians, `max_shift` in scene units).
 fn time_correlated_perturbations(
@@ -210,6 +223,7 @@ fn time_correlated_perturbations(
     max_angle: f64,
     max_shift: f64,
     anchor_every: usize,
+    model: AnchorDraws,
     seed: u64,
 ) -> (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) {
     if n == 0 {
@@ -217,34 +231,41 @@ fn time_correlated_perturbations(
     }
     let anchors = anchor_frames(n, anchor_every);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut draws: Vec<AnchorDraw> = anchors
+    // Per anchor: (rotation vector, displacement), in drawing order.
+    let mut draws: Vec<(Vector3<f64>, Vector3<f64>)> = anchors
         .iter()
-        .map(|_| AnchorDraw {
-            axis: uniform_direction(&mut rng),
-            angle: rng.random::<f64>() * max_angle,
-            direction: uniform_direction(&mut rng),
-            length: rng.random::<f64>() * max_shift,
+        .map(|_| {
+            let r = uniform_direction(&mut rng).into_inner() * rng.random::<f64>();
+            let d = uniform_direction(&mut rng).into_inner() * rng.random::<f64>();
+            (r, d)
         })
         .collect();
-    // Rescale so that the stated maxima are attained (by the largest draw).
-    let largest_angle = draws.iter().map(|d| d.angle).fold(0.0, f64::max);
-    let largest_length = draws.iter().map(|d| d.length).fold(0.0, f64::max);
-    for d in &mut draws {
-        if largest_angle > 0.0 {
-            d.angle *= max_angle / largest_angle;
-        }
-        if largest_length > 0.0 {
-            d.length *= max_shift / largest_length;
+    if model == AnchorDraws::Drift {
+        draws[0] = (Vector3::zeros(), Vector3::zeros());
+        for k in 1..draws.len() {
+            let (r, d) = draws[k - 1];
+            draws[k].0 += r;
+            draws[k].1 += d;
         }
     }
+    // Rescale so that the stated maxima are attained (by the largest anchor).
+    let largest_angle = draws.iter().map(|(r, _)| r.norm()).fold(0.0, f64::max);
+    let largest_length = draws.iter().map(|(_, d)| d.norm()).fold(0.0, f64::max);
+    let angle_scale = if largest_angle > 0.0 {
+        max_angle / largest_angle
+    } else {
+        0.0
+    };
+    let length_scale = if largest_length > 0.0 {
+        max_shift / largest_length
+    } else {
+        0.0
+    };
     let rot: Vec<UnitQuaternion<f64>> = draws
         .iter()
-        .map(|d| UnitQuaternion::from_axis_angle(&d.axis, d.angle))
+        .map(|(r, _)| UnitQuaternion::from_scaled_axis(r * angle_scale))
         .collect();
-    let shift: Vec<Vector3<f64>> = draws
-        .iter()
-        .map(|d| d.direction.into_inner() * d.length)
-        .collect();
+    let shift: Vec<Vector3<f64>> = draws.iter().map(|(_, d)| d * length_scale).collect();
     let mut rotations = Vec::with_capacity(n);
     let mut shifts = Vec::with_capacity(n);
     let mut k = 0;
@@ -330,11 +351,16 @@ mod tests {
     #[test]
     fn time_correlated_attains_the_stated_maxima_and_is_continuous() {
         let (gt, diameter) = orbit_poses(100);
-        for (seed, anchor_every) in [(0, 10), (1, 10), (7, 7), (3, 1)] {
+        let cases = [(0, 10), (1, 10), (7, 7), (3, 1)];
+        for ((seed, anchor_every), model) in cases
+            .into_iter()
+            .flat_map(|c| [(c, AnchorDraws::Drift), (c, AnchorDraws::Independent)])
+        {
             let noise = PoseNoise::TimeCorrelated {
                 max_rotation_deg: 60.0,
                 max_translation: 0.2,
                 anchor_every,
+                anchors: model,
                 seed,
             };
             let init = noise.apply(&gt, diameter);
@@ -354,6 +380,7 @@ mod tests {
                 60f64.to_radians(),
                 0.2 * diameter,
                 anchor_every,
+                model,
                 seed,
             );
             let max_shift = shift.iter().map(|d| d.norm()).fold(0.0, f64::max);
@@ -379,7 +406,7 @@ mod tests {
     fn time_correlated_anchors_include_the_last_frame_and_interpolate() {
         // 26 frames, anchors 0, 10, 20, 25: frame 22 is 40 % of the way from 20 to 25.
         assert_eq!(anchor_frames(26, 10), [0, 10, 20, 25]);
-        let (rot, shift) = time_correlated_perturbations(26, 1.0, 2.0, 10, 5);
+        let (rot, shift) = time_correlated_perturbations(26, 1.0, 2.0, 10, AnchorDraws::Drift, 5);
         let between = rot[20].slerp(&rot[25], 0.4);
         assert!(rotation_angle_between(&between, &rot[22]) < 1e-12);
         assert!((shift[22] - (0.6 * shift[20] + 0.4 * shift[25])).norm() < 1e-12);
@@ -394,13 +421,46 @@ mod tests {
         assert_eq!(anchor_frames(5, 10), [0, 4]);
         assert_eq!(anchor_frames(2, 1), [0, 1]);
         assert_eq!(anchor_frames(1, 3), [0]);
-        // One frame: the single anchor carries both maxima.
-        let (rot, shift) = time_correlated_perturbations(1, 1.0, 2.0, 10, 5);
+        // One frame: the single independent anchor carries both maxima; a drift starts exact.
+        let one = |model| time_correlated_perturbations(1, 1.0, 2.0, 10, model, 5);
+        let (rot, shift) = one(AnchorDraws::Independent);
         assert!((rot[0].angle() - 1.0).abs() < 1e-12 && (shift[0].norm() - 2.0).abs() < 1e-12);
+        let (rot, shift) = one(AnchorDraws::Drift);
+        assert!(rot[0].angle() == 0.0 && shift[0] == Vector3::zeros());
+        let none = time_correlated_perturbations(0, 1.0, 2.0, 10, AnchorDraws::Drift, 5);
+        assert!(none.0.is_empty());
+    }
+
+    #[test]
+    fn drift_starts_exact_and_grows_while_independent_anchors_jump() {
+        // Averaged over seeds: a drift's error grows with time, and its neighbouring anchors
+        // are closer to each other than independent ones of the same maximum.
+        let (mut early, mut late) = (0.0, 0.0);
+        let mut anchor_step = [0.0; 2];
+        for seed in 0..20 {
+            for (m, model) in [AnchorDraws::Drift, AnchorDraws::Independent]
+                .into_iter()
+                .enumerate()
+            {
+                let (rot, shift) = time_correlated_perturbations(100, 1.0, 1.0, 10, model, seed);
+                let anchors = anchor_frames(100, 10);
+                anchor_step[m] += anchors
+                    .windows(2)
+                    .map(|w| rotation_angle_between(&rot[w[0]], &rot[w[1]]))
+                    .sum::<f64>();
+                if model == AnchorDraws::Drift {
+                    assert!(rot[0].angle() == 0.0 && shift[0] == Vector3::zeros());
+                    early += rot[..33].iter().map(|r| r.angle()).sum::<f64>();
+                    late += rot[67..].iter().map(|r| r.angle()).sum::<f64>();
+                }
+            }
+        }
+        assert!(late > 2.0 * early, "early {early}, late {late}");
         assert!(
-            time_correlated_perturbations(0, 1.0, 2.0, 10, 5)
-                .0
-                .is_empty()
+            anchor_step[0] < 0.6 * anchor_step[1],
+            "drift {}, independent {}",
+            anchor_step[0],
+            anchor_step[1]
         );
     }
 
@@ -454,6 +514,7 @@ mod tests {
                 max_rotation_deg: 60.0,
                 max_translation: 0.2,
                 anchor_every: 10,
+                anchors: AnchorDraws::Drift,
                 seed: 3
             }
         );
@@ -473,6 +534,16 @@ mod tests {
         assert!(parse("kind = \"identity\"\nseed = 3").is_err());
         assert!(parse("kind = \"none\"\nsigma = 0.1").is_err());
         assert!(parse("seed = 3").is_err());
+        let independent = parse("kind = \"time_correlated\"\nanchors = \"independent\"").unwrap();
+        assert!(matches!(
+            independent,
+            PoseNoise::TimeCorrelated {
+                anchors: AnchorDraws::Independent,
+                ..
+            }
+        ));
+        let err = parse("kind = \"time_correlated\"\nanchors = \"walk\"").unwrap_err();
+        assert!(err.to_string().contains("drift"), "{err}");
         let err = parse("kind = \"iid\"\nsigmaa = 0.1").unwrap_err();
         assert!(err.to_string().contains("sigmaa"), "{err}");
         let err = parse("kind = \"time_correlated\"\nsigma = 0.1").unwrap_err();
@@ -487,6 +558,7 @@ mod tests {
                     max_rotation_deg: 200.0,
                     max_translation: 0.2,
                     anchor_every: 10,
+                    anchors: AnchorDraws::Drift,
                     seed: 0,
                 },
                 "noise.max_rotation_deg",
@@ -496,6 +568,7 @@ mod tests {
                     max_rotation_deg: 10.0,
                     max_translation: -0.2,
                     anchor_every: 10,
+                    anchors: AnchorDraws::Drift,
                     seed: 0,
                 },
                 "noise.max_translation",
@@ -505,6 +578,7 @@ mod tests {
                     max_rotation_deg: 10.0,
                     max_translation: 0.2,
                     anchor_every: 0,
+                    anchors: AnchorDraws::Drift,
                     seed: 0,
                 },
                 "noise.anchor_every",
