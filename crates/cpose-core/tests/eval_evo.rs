@@ -14,8 +14,8 @@ use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use cpose_core::eval::{
-    Alignment, DEFAULT_MAX_DIFF_SECS, Trajectory, align_poses, ape_rotation_angle, associate,
-    barf_pose_errors, error_stats, read_tum, rpe, write_tum,
+    Alignment, DEFAULT_MAX_DIFF_SECS, ReflectionFix, Trajectory, align_poses, ape_rotation_angle,
+    associate, barf_pose_errors, error_stats, read_tum, rpe, write_tum,
 };
 
 /// The fr1_xyz files `(ground truth, estimate)`, or `None` (after saying so) when the shared data
@@ -268,7 +268,7 @@ fn eval_invariants_on_tum_fr1_xyz() {
     assert_eq!(forward.pairs, flipped);
     // BARF errors on the associated poses are finite and small for a good estimate.
     let (reference, estimate) = forward.poses(&gt, &est);
-    let barf = barf_pose_errors(&reference, &estimate).unwrap();
+    let barf = barf_pose_errors(&reference, &estimate, ReflectionFix::BarfThirdRow).unwrap();
     assert!(
         barf.rot_err_deg.is_finite() && barf.rot_err_deg < 10.0,
         "{}",

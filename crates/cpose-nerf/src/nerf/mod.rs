@@ -23,6 +23,11 @@
 //!   images held out; `[noise] kind = "identity"` is the paper's unknown-pose start.
 //! - `blender`: a NeRF-synthetic scene (`transforms_train.json`); BARF's i.i.d. noise.
 //!
+//! Pose errors are BARF's (Procrustes on the camera centres, then mean rotation and translation
+//! errors) with one change: when the centres align best through a reflection — near-planar
+//! centres, as LLFF's — Kabsch's fix replaces BARF's third-row negation, which can misalign by
+//! many degrees ([`ReflectionFix`]); the log and `metrics.json` then also give BARF's reading.
+//!
 //! Outputs: `metrics.json` (`{condition: {method: {rot_err_deg, trans_err, psnr_db, ssim, …}}}`),
 //! `traj_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`, `traj_init.txt` (TUM),
 //! `trajectory_<method>.png`, `view_<k>_<method>.png` (rendered | truth), `depth_<k>_<method>.png`,
@@ -38,7 +43,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use cpose_core::eval::{Trajectory, barf_pose_errors, write_tum};
+use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::{FieldContext, PoseField, PoseNetConfig, Section, TimeRange};
@@ -542,10 +547,17 @@ fn dataset_views(exp: &Experiment) -> anyhow::Result<Views> {
 /// One method's results, as in `metrics.json`.
 #[derive(Debug, Serialize)]
 struct MethodResult {
-    /// Mean rotation error after Procrustes alignment, degrees.
+    /// Mean rotation error after Procrustes alignment (BARF's, with Kabsch's reflection fix),
+    /// degrees.
     rot_err_deg: f64,
     /// Mean translation error after alignment, scene units.
     trans_err: f64,
+    /// Only when the centres' best orthogonal map was a reflection: the errors with BARF's own
+    /// third-row fix, for comparison with BARF's code ([`ReflectionFix::BarfThirdRow`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rot_err_deg_barf_fix: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    trans_err_barf_fix: Option<f64>,
     /// The same errors of the initial poses (none when they all coincide: unknown poses).
     init_rot_err_deg: Option<f64>,
     init_trans_err: Option<f64>,
@@ -711,8 +723,11 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     if train.log_every > 0 && (it + 1) % train.log_every == 0 {
                         let n = (it + 1).min(recent.len());
                         let loss = recent.iter().take(n).sum::<f64>() / n as f64;
-                        let errors =
-                            barf_pose_errors(&views.train_truth, trainer.poses().current())?;
+                        let errors = barf_pose_errors(
+                            &views.train_truth,
+                            trainer.poses().current(),
+                            ReflectionFix::Kabsch,
+                        )?;
                         input.run_dir.log(format_args!(
                             "{} {}/{iterations}: loss {loss:.5} (training PSNR {:.2} dB), rotation {:.3}°, translation {:.4}",
                             method.key(),
@@ -822,8 +837,25 @@ fn evaluate(
     seed: u64,
 ) -> anyhow::Result<MethodResult> {
     let estimate = poses.current();
-    let errors = barf_pose_errors(&views.train_truth, estimate)?;
-    let init_errors = barf_pose_errors(&views.train_truth, poses.initial()).ok();
+    let errors = barf_pose_errors(&views.train_truth, estimate, ReflectionFix::Kabsch)?;
+    let barf_fix = if errors.alignment.reflected {
+        let barf = barf_pose_errors(&views.train_truth, estimate, ReflectionFix::BarfThirdRow)?;
+        input.run_dir.log(format_args!(
+            "{}: the camera centres align best through a reflection (near-planar centres); with \
+             Kabsch's fix rotation {:.3}°, translation {:.4}; with BARF's third-row fix {:.3}°, \
+             {:.4}",
+            method.key(),
+            errors.rot_err_deg,
+            errors.trans_err,
+            barf.rot_err_deg,
+            barf.trans_err,
+        ));
+        Some(barf)
+    } else {
+        None
+    };
+    let init_errors =
+        barf_pose_errors(&views.train_truth, poses.initial(), ReflectionFix::Kabsch).ok();
     let aligned: Vec<_> = estimate
         .iter()
         .map(|p| errors.alignment.align_pose(p))
@@ -917,6 +949,8 @@ fn evaluate(
     Ok(MethodResult {
         rot_err_deg: errors.rot_err_deg,
         trans_err: errors.trans_err,
+        rot_err_deg_barf_fix: barf_fix.as_ref().map(|e| e.rot_err_deg),
+        trans_err_barf_fix: barf_fix.as_ref().map(|e| e.trans_err),
         init_rot_err_deg: init_errors.as_ref().map(|e| e.rot_err_deg),
         init_trans_err: init_errors.as_ref().map(|e| e.trans_err),
         psnr_db: psnr / n,
