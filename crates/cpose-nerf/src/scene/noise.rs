@@ -33,8 +33,8 @@ pub enum PoseNoise {
     /// (anchor 0 is exact), with [`AnchorDraws::Independent`] its own draw. All rotation
     /// vectors are then scaled by one factor so that the largest angle is `max_rotation_deg`,
     /// all displacements so that the largest is `max_translation · diameter`; `R_k = Exp(r_k)`,
-    /// `Δc_k = d_k`. Between anchors
-    /// `R_δ` is the slerp and `Δc` the linear interpolation in the frame index. The noise acts
+    /// `Δc_k = d_k`. Between anchors `R_δ` is the slerp and `Δc` the linear interpolation in
+    /// the frame index. The noise acts
     /// in world coordinates, as BARF's and the paper's (`T_init = T_{c,w} ∘ T_noise`):
     /// `world_from_camera_init = (R_δ, Δc) ∘ world_from_camera_gt`, i.e. `R_init = R_δ R_gt`,
     /// `c_init = R_δ c_gt + Δc` — a rotation about the world origin (the orbit's centre) and a
@@ -92,7 +92,7 @@ pub enum AnchorDraws {
     #[default]
     Drift,
     /// Every anchor is perturbed on its own, so neighbouring anchors may err in opposite
-    /// directions (a harsher test than the paper's).
+    /// directions, and no frame is exact.
     Independent,
 }
 
