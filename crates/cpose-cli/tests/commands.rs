@@ -208,6 +208,16 @@ fn every_config_runs_as_a_smoke_test() {
                 }
             }
         }
+        if text.contains("task = \"synth_room\"") {
+            let data_dir = temp_dir("smoke-room");
+            for set in [
+                "synthetic.frames=3".to_string(),
+                "synthetic.width=32".to_string(),
+                format!("output.path={}", data_dir.display()),
+            ] {
+                args.extend(["--set".into(), set]);
+            }
+        }
         let out_dir = temp_dir("smoke").join("run");
         args.extend([
             "--set".into(),

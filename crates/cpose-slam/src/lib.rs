@@ -3,3 +3,7 @@
 //! TUM-RGBD readers; task `slam`.
 
 pub use cpose_nerf;
+
+pub mod data;
+pub mod synth;
+mod synth_task;

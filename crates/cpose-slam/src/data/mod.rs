@@ -1,0 +1,431 @@
+//! RGB-D sequences: colour and metric depth per frame, with timestamps and ground-truth poses
+//! where the dataset has them. Readers for Replica (NICE-SLAM's layout), ScanNet and TUM-RGBD
+//! list the files and parse the poses up front; frames are decoded one at a time
+//! ([`RgbdSequence::load`]), so a sequence of thousands of frames costs no memory until used.
+//!
+//! # Conventions
+//!
+//! * Poses are `world_from_camera` with OpenCV camera axes (x right, y down, z forward), as all
+//!   three datasets store them (NICE-SLAM flips to OpenGL internally; cpose does not).
+//! * Depth is metric camera `z` (not the distance along the ray); `0` marks a missing reading.
+//! * A sequence loads at a resolution factor `s` (`0 < s ≤ 1`): colour is resized with a tent
+//!   filter, depth by taking the nearest stored pixel (averaging depth across an object's edge
+//!   would invent surfaces between the two), and the camera is scaled to the new size. Then
+//!   `crop_edge` pixels are cut from every side (ScanNet and TUM, as NICE-SLAM).
+
+mod depth;
+mod replica;
+mod scannet;
+mod tum;
+
+use std::path::{Path, PathBuf};
+
+use cpose_nerf::camera::PinholeCamera;
+use cpose_nerf::image::{Image, ImageError};
+use nalgebra::Isometry3;
+
+pub use depth::DepthImage;
+pub use replica::{REPLICA_DEPTH_SCALE, REPLICA_INTRINSICS, read_replica, write_replica};
+pub use scannet::{SCANNET_DEPTH_SCALE, SCANNET_INTRINSICS, read_scannet};
+pub use tum::{TUM_DEPTH_SCALE, TUM_FR1_INTRINSICS, read_tum_rgbd};
+
+/// Errors from reading or writing RGB-D sequences. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum RgbdError {
+    /// A file or folder could not be read or written.
+    #[error("cannot access {}: {error}", .path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The underlying error.
+        error: std::io::Error,
+    },
+    /// A colour image could not be loaded or saved (the error names the file).
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    /// A file's content is not what the format requires.
+    #[error("{}: expected {expected}, got {found}", .path.display())]
+    Format {
+        /// The file (with `:line` where it applies).
+        path: PathBuf,
+        /// What the reader expected.
+        expected: String,
+        /// What it found.
+        found: String,
+    },
+    /// A folder holds no frames, or the frame lists disagree.
+    #[error("{}: {message}", .path.display())]
+    Layout {
+        /// The sequence folder.
+        path: PathBuf,
+        /// What is wrong, and what the layout should be.
+        message: String,
+    },
+}
+
+impl RgbdError {
+    fn io(path: &Path, error: std::io::Error) -> Self {
+        RgbdError::Io {
+            path: path.to_path_buf(),
+            error,
+        }
+    }
+
+    fn format(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> Self {
+        RgbdError::Format {
+            path: path.to_path_buf(),
+            expected: expected.into(),
+            found: found.into(),
+        }
+    }
+
+    fn layout(path: &Path, message: impl Into<String>) -> Self {
+        RgbdError::Layout {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Pinhole intrinsics as the datasets publish them: for a nominal `width × height` image, with
+/// the principal point in integer pixel coordinates (pixel `0`'s centre at `0`, NICE-SLAM's and
+/// OpenCV's convention). Images stored at another size with the same aspect ratio scale them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intrinsics {
+    /// Nominal image width, pixels.
+    pub width: usize,
+    /// Nominal image height, pixels.
+    pub height: usize,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point x, integer pixel coordinates.
+    pub cx: f64,
+    /// Principal point y, integer pixel coordinates.
+    pub cy: f64,
+}
+
+impl Intrinsics {
+    /// The camera of images of `width × height` pixels: the intrinsics scaled by
+    /// `width / self.width` and `height / self.height` about the image's corner, in cpose's
+    /// continuous pixel coordinates (`c = (c_int + ½)·s`). Errors (naming `path`) unless the
+    /// aspect ratios agree to 1%.
+    pub fn camera_for(
+        &self,
+        width: usize,
+        height: usize,
+        path: &Path,
+    ) -> Result<PinholeCamera, RgbdError> {
+        let sx = width as f64 / self.width as f64;
+        let sy = height as f64 / self.height as f64;
+        if width == 0 || height == 0 || (sx / sy - 1.0).abs() > 0.01 {
+            return Err(RgbdError::format(
+                path,
+                format!(
+                    "an image of the intrinsics' aspect ratio ({}×{} or a multiple)",
+                    self.width, self.height
+                ),
+                format!("{width}×{height}"),
+            ));
+        }
+        Ok(PinholeCamera {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: (self.cx + 0.5) * sx,
+            cy: (self.cy + 0.5) * sy,
+        })
+    }
+}
+
+/// The files of one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameFiles {
+    /// Timestamp, seconds (the dataset's clock; Replica and ScanNet have none, so frame index
+    /// over the nominal frame rate).
+    pub time: f64,
+    /// Colour image (PNG or JPEG).
+    pub color: PathBuf,
+    /// Depth image (16-bit PNG, `depth_scale` units per metre).
+    pub depth: PathBuf,
+}
+
+/// One loaded frame.
+#[derive(Clone, Debug)]
+pub struct RgbdFrame {
+    /// Index in the sequence.
+    pub index: usize,
+    /// Timestamp, seconds.
+    pub time: f64,
+    /// Colour, linear in `[0, 1]` as stored (no gamma handling).
+    pub color: Image,
+    /// Metric depth, `0` where missing.
+    pub depth: DepthImage,
+}
+
+/// An RGB-D sequence on disk: its frames' files, ground truth and camera.
+#[derive(Clone, Debug)]
+pub struct RgbdSequence {
+    /// The sequence folder.
+    pub root: PathBuf,
+    /// The camera of the frames as [`RgbdSequence::load`] returns them (scaled and cropped).
+    pub camera: PinholeCamera,
+    /// Per frame, its files.
+    pub frames: Vec<FrameFiles>,
+    /// Per frame, the ground-truth `world_from_camera`; `None` where the dataset has none or a
+    /// non-finite one (ScanNet marks lost frames with `inf`).
+    pub truth: Vec<Option<Isometry3<f64>>>,
+    /// Depth PNG units per metre (Replica 6553.5, ScanNet 1000, TUM 5000).
+    pub depth_scale: f64,
+    /// The stored size of the depth images, which `camera` was derived from (colour of another
+    /// size with the same aspect ratio, as ScanNet's, is resized to it first).
+    stored: (usize, usize),
+    /// Resolution factor applied on load.
+    resolution: f64,
+    /// Pixels cut from every side after resizing.
+    crop_edge: usize,
+}
+
+impl RgbdSequence {
+    /// Assembles a sequence whose stored depth images are `stored` pixels, loaded at
+    /// `resolution` and cropped by `crop_edge`. Errors on an empty frame list, a factor outside
+    /// `(0, 1]` or a crop that leaves no pixels.
+    fn new(
+        root: &Path,
+        intrinsics: &Intrinsics,
+        stored: (usize, usize),
+        frames: Vec<FrameFiles>,
+        truth: Vec<Option<Isometry3<f64>>>,
+        depth_scale: f64,
+        resolution: f64,
+        crop_edge: usize,
+    ) -> Result<Self, RgbdError> {
+        if frames.is_empty() {
+            return Err(RgbdError::layout(root, "no frames found"));
+        }
+        if !(resolution > 0.0 && resolution <= 1.0) {
+            return Err(RgbdError::layout(
+                root,
+                format!("resolution factor {resolution} must lie in (0, 1]"),
+            ));
+        }
+        debug_assert_eq!(frames.len(), truth.len());
+        let first = &frames[0].depth;
+        let full = intrinsics.camera_for(stored.0, stored.1, first)?;
+        // The camera of the image `resized` returns: the exact size ratio on each axis.
+        let (sw, sh) = resized_size(stored, resolution);
+        let (kx, ky) = (sw as f64 / stored.0 as f64, sh as f64 / stored.1 as f64);
+        let c = crop_edge as f64;
+        if 2 * crop_edge >= sw.min(sh) {
+            return Err(RgbdError::layout(
+                root,
+                format!("crop_edge {crop_edge} leaves no pixels of a {sw}×{sh} image"),
+            ));
+        }
+        let camera = PinholeCamera {
+            width: sw - 2 * crop_edge,
+            height: sh - 2 * crop_edge,
+            fx: full.fx * kx,
+            fy: full.fy * ky,
+            cx: full.cx * kx - c,
+            cy: full.cy * ky - c,
+        };
+        Ok(Self {
+            root: root.to_path_buf(),
+            camera,
+            frames,
+            truth,
+            depth_scale,
+            stored,
+            resolution,
+            crop_edge,
+        })
+    }
+
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether there are no frames (never true for a sequence a reader returned).
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// Frame timestamps, seconds.
+    pub fn times(&self) -> Vec<f64> {
+        self.frames.iter().map(|f| f.time).collect()
+    }
+
+    /// Loads frame `index`: decodes both images, checks their stored sizes, resizes and crops.
+    /// Errors name the file: missing, corrupt, or of another size than the first frame.
+    ///
+    /// # Panics
+    /// If `index` is out of range.
+    pub fn load(&self, index: usize) -> Result<RgbdFrame, RgbdError> {
+        let files = &self.frames[index];
+        let color = Image::load(&files.color)?;
+        let depth = DepthImage::load_png(&files.depth, self.depth_scale)?;
+        // ScanNet stores colour larger than depth: colour is resized to the depth's size.
+        let color = if (color.width(), color.height()) == self.stored {
+            color
+        } else if same_aspect(&color, self.stored) {
+            resize_exact(&color, self.stored.0, self.stored.1)
+        } else {
+            return Err(size_error(&files.color, self.stored, &color));
+        };
+        if (depth.width(), depth.height()) != self.stored {
+            return Err(RgbdError::format(
+                &files.depth,
+                format!("a depth image of {}×{}", self.stored.0, self.stored.1),
+                format!("{}×{}", depth.width(), depth.height()),
+            ));
+        }
+        let (color, depth) = if self.resolution < 1.0 {
+            let (w, h) = resized_size(self.stored, self.resolution);
+            (resize_exact(&color, w, h), depth.resized_nearest(w, h))
+        } else {
+            (color, depth)
+        };
+        let e = self.crop_edge;
+        Ok(RgbdFrame {
+            index,
+            time: files.time,
+            color: crop(&color, e),
+            depth: depth.cropped(e),
+        })
+    }
+}
+
+/// `(max(1, round(W·s)), max(1, round(H·s)))`, as [`Image::resized`].
+fn resized_size(stored: (usize, usize), s: f64) -> (usize, usize) {
+    let r = |n: usize| ((n as f64 * s).round() as usize).max(1);
+    (r(stored.0), r(stored.1))
+}
+
+fn same_aspect(image: &Image, size: (usize, usize)) -> bool {
+    let a = image.width() as f64 / image.height() as f64;
+    let b = size.0 as f64 / size.1 as f64;
+    (a / b - 1.0).abs() < 0.02
+}
+
+fn size_error(path: &Path, expected: (usize, usize), image: &Image) -> RgbdError {
+    RgbdError::format(
+        path,
+        format!("a colour image of {}×{}", expected.0, expected.1),
+        format!("{}×{}", image.width(), image.height()),
+    )
+}
+
+/// `image` resized to exactly `w × h` (the tent filter of [`Image::resized`]).
+fn resize_exact(image: &Image, w: usize, h: usize) -> Image {
+    let out = image.resized(w as f64 / image.width() as f64);
+    if (out.width(), out.height()) == (w, h) {
+        out
+    } else {
+        // Rounding of the other axis differs by a pixel: resample to the exact size.
+        Image::from_fn(w, h, |x, y| {
+            let sx = ((x as f64 + 0.5) * out.width() as f64 / w as f64) as usize;
+            let sy = ((y as f64 + 0.5) * out.height() as f64 / h as f64) as usize;
+            out.pixel(sx.min(out.width() - 1), sy.min(out.height() - 1))
+        })
+    }
+}
+
+/// `image` without `e` pixels on every side.
+fn crop(image: &Image, e: usize) -> Image {
+    if e == 0 {
+        return image.clone();
+    }
+    Image::from_fn(image.width() - 2 * e, image.height() - 2 * e, |x, y| {
+        image.pixel(x + e, y + e)
+    })
+}
+
+/// The lines of a text file with their 1-based numbers, skipping blanks and `#` comments.
+fn data_lines(path: &Path) -> Result<Vec<(usize, String)>, RgbdError> {
+    let text = std::fs::read_to_string(path).map_err(|e| RgbdError::io(path, e))?;
+    Ok(text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim().to_string()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+        .collect())
+}
+
+/// Parses `n` whitespace-separated floats from `line` (line `number` of `path`).
+fn parse_floats(path: &Path, number: usize, line: &str, n: usize) -> Result<Vec<f64>, RgbdError> {
+    let values: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse::<f64>).collect();
+    match values {
+        Ok(v) if v.len() == n => Ok(v),
+        _ => Err(RgbdError::format(
+            &line_path(path, number),
+            format!("{n} numbers"),
+            format!("{line:?}"),
+        )),
+    }
+}
+
+/// `path:number`, to name a line in an error.
+fn line_path(path: &Path, number: usize) -> PathBuf {
+    PathBuf::from(format!("{}:{number}", path.display()))
+}
+
+/// A `world_from_camera` from a row-major 4×4 matrix; `None` unless every entry is finite and
+/// the rotation block is orthonormal to 1e-3 (it is re-orthonormalised).
+fn pose_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
+    if m.len() < 12 || m.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let r = nalgebra::Matrix3::new(m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]);
+    if (r.transpose() * r - nalgebra::Matrix3::identity()).amax() > 1e-3 || r.determinant() <= 0.0 {
+        return None;
+    }
+    let rotation = nalgebra::UnitQuaternion::from_matrix(&r);
+    Some(Isometry3::from_parts(
+        nalgebra::Translation3::new(m[3], m[7], m[11]),
+        rotation,
+    ))
+}
+
+/// The files of `folder` whose names start with `prefix` and end with one of `extensions`,
+/// sorted by the number in the name (ScanNet's `10.jpg` after `9.jpg`).
+fn numbered_files(
+    folder: &Path,
+    prefix: &str,
+    extensions: &[&str],
+) -> Result<Vec<PathBuf>, RgbdError> {
+    let entries = std::fs::read_dir(folder).map_err(|e| RgbdError::io(folder, e))?;
+    let mut found: Vec<(u64, PathBuf)> = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| RgbdError::io(folder, e))?.path();
+        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let Some(rest) = name.strip_prefix(prefix) else {
+            continue;
+        };
+        let Some((stem, ext)) = rest.rsplit_once('.') else {
+            continue;
+        };
+        if !extensions.contains(&ext.to_ascii_lowercase().as_str()) {
+            continue;
+        }
+        if let Ok(n) = stem.parse::<u64>() {
+            found.push((n, path));
+        }
+    }
+    found.sort();
+    Ok(found.into_iter().map(|(_, p)| p).collect())
+}
+
+/// A fresh empty folder for one test.
+#[cfg(test)]
+pub(crate) fn test_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("cpose-slam-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp folder");
+    dir
+}

@@ -1,0 +1,197 @@
+//! ScanNet as NICE-SLAM reads it: `color/N.jpg`, `depth/N.png` (16-bit, millimetres) and
+//! `pose/N.txt` (a 4×4 `world_from_camera`, OpenCV axes; lost frames hold `inf`), sorted by `N`,
+//! in the scene folder or its `frames/` subfolder. Colour (1296×968) is resized to the depth's
+//! 640×480. Intrinsics from `intrinsic/intrinsic_depth.txt` when present, else NICE-SLAM's.
+
+use std::path::Path;
+
+use super::replica::stored_size;
+use super::{
+    FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, numbered_files, parse_floats,
+    pose_from_rows,
+};
+
+/// The depth camera of NICE-SLAM's ScanNet config (640×480).
+pub const SCANNET_INTRINSICS: Intrinsics = Intrinsics {
+    width: 640,
+    height: 480,
+    fx: 577.590698,
+    fy: 578.729797,
+    cx: 318.905426,
+    cy: 242.683609,
+};
+
+/// ScanNet's depth PNG units per metre.
+pub const SCANNET_DEPTH_SCALE: f64 = 1000.0;
+
+/// ScanNet's frame rate, Hz (frame `i` gets time `i / 30`).
+const SCANNET_FRAME_RATE: f64 = 30.0;
+
+/// Reads the ScanNet scene in `root` (or `root/frames`), cropping `crop_edge` pixels from every
+/// side after resizing (NICE-SLAM: 10). Frames whose pose is missing from `pose/` are an error;
+/// poses with `inf`/`nan` entries are kept as `None` (dropped from the ATE, as NICE-SLAM does).
+pub fn read_scannet(
+    root: &Path,
+    resolution: f64,
+    crop_edge: usize,
+) -> Result<RgbdSequence, RgbdError> {
+    let base = if root.join("frames").join("color").is_dir() {
+        root.join("frames")
+    } else {
+        root.to_path_buf()
+    };
+    if !base.join("color").is_dir() {
+        return Err(RgbdError::layout(
+            root,
+            "expected a ScanNet scene: color/0.jpg, depth/0.png, pose/0.txt, … \
+             (in the scene folder or its frames/ subfolder)",
+        ));
+    }
+    let colors = numbered_files(&base.join("color"), "", &["jpg", "jpeg", "png"])?;
+    let depths = numbered_files(&base.join("depth"), "", &["png"])?;
+    let poses = numbered_files(&base.join("pose"), "", &["txt"])?;
+    if colors.is_empty() || colors.len() != depths.len() || colors.len() != poses.len() {
+        return Err(RgbdError::layout(
+            &base,
+            format!(
+                "color/, depth/ and pose/ must hold one file per frame; found {}, {} and {}",
+                colors.len(),
+                depths.len(),
+                poses.len()
+            ),
+        ));
+    }
+    let stored = stored_size(&depths[0])?;
+    let intrinsics = match base.join("intrinsic/intrinsic_depth.txt") {
+        path if path.is_file() => read_matrix_intrinsics(&path, stored)?,
+        _ => SCANNET_INTRINSICS,
+    };
+    let mut truth = Vec::with_capacity(poses.len());
+    for path in &poses {
+        truth.push(pose_from_rows(&read_matrix(path)?));
+    }
+    let frames = colors
+        .into_iter()
+        .zip(depths)
+        .enumerate()
+        .map(|(i, (color, depth))| FrameFiles {
+            time: i as f64 / SCANNET_FRAME_RATE,
+            color,
+            depth,
+        })
+        .collect();
+    RgbdSequence::new(
+        root,
+        &intrinsics,
+        stored,
+        frames,
+        truth,
+        SCANNET_DEPTH_SCALE,
+        resolution,
+        crop_edge,
+    )
+}
+
+/// The 16 numbers of a 4×4 matrix written as four lines of four (`inf` and `nan` parse).
+fn read_matrix(path: &Path) -> Result<Vec<f64>, RgbdError> {
+    let lines = data_lines(path)?;
+    if lines.len() < 4 {
+        return Err(RgbdError::format(
+            path,
+            "a 4×4 matrix on four lines",
+            format!("{} lines", lines.len()),
+        ));
+    }
+    let mut m = Vec::with_capacity(16);
+    for (number, line) in &lines[..4] {
+        m.extend(parse_floats(path, *number, line, 4)?);
+    }
+    Ok(m)
+}
+
+/// Intrinsics from a 4×4 `K` file, for images of `size`.
+fn read_matrix_intrinsics(path: &Path, size: (usize, usize)) -> Result<Intrinsics, RgbdError> {
+    let m = read_matrix(path)?;
+    let k = Intrinsics {
+        width: size.0,
+        height: size.1,
+        fx: m[0],
+        fy: m[5],
+        cx: m[2],
+        cy: m[6],
+    };
+    if [k.fx, k.fy, k.cx, k.cy].iter().all(|v| v.is_finite()) && k.fx > 0.0 && k.fy > 0.0 {
+        Ok(k)
+    } else {
+        Err(RgbdError::format(
+            path,
+            "a camera matrix with positive focal lengths",
+            format!("fx {} fy {} cx {} cy {}", k.fx, k.fy, k.cx, k.cy),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{DepthImage, test_dir};
+    use super::*;
+    use cpose_nerf::image::Image;
+
+    #[test]
+    fn scannet_sorts_numerically_resizes_colour_crops_and_keeps_lost_poses_as_none() {
+        let root = test_dir("scannet");
+        let frames = root.join("frames");
+        for sub in ["color", "depth", "pose", "intrinsic"] {
+            std::fs::create_dir_all(frames.join(sub)).unwrap();
+        }
+        std::fs::write(
+            frames.join("intrinsic/intrinsic_depth.txt"),
+            "20 0 15.5 0\n0 20 11.5 0\n0 0 1 0\n0 0 0 1\n",
+        )
+        .unwrap();
+        for i in [0usize, 2, 10] {
+            Image::from_fn(64, 48, |_, _| [0.25, 0.5, 0.75])
+                .save_png(frames.join(format!("color/{i}.jpg")))
+                .unwrap();
+            DepthImage::new(32, 24, vec![0.001 * (i + 1) as f32; 32 * 24])
+                .unwrap()
+                .save_png(&frames.join(format!("depth/{i}.png")), 1000.0)
+                .unwrap();
+            let pose = if i == 2 {
+                "inf inf inf inf\ninf inf inf inf\ninf inf inf inf\n0 0 0 1\n".to_string()
+            } else {
+                format!("1 0 0 {i}\n0 1 0 0\n0 0 1 0\n0 0 0 1\n")
+            };
+            std::fs::write(frames.join(format!("pose/{i}.txt")), pose).unwrap();
+        }
+        let seq = read_scannet(&root, 1.0, 2).unwrap();
+        assert_eq!(seq.len(), 3);
+        assert!(seq.frames[2].depth.ends_with("10.png"), "numeric order");
+        assert_eq!(seq.truth[2].unwrap().translation.x, 10.0);
+        assert!(seq.truth[1].is_none(), "inf pose is lost");
+        // Camera: depth size, minus the crop on each side.
+        assert_eq!((seq.camera.width, seq.camera.height), (28, 20));
+        assert_eq!((seq.camera.cx, seq.camera.cy), (14.0, 10.0));
+        let f = seq.load(2).unwrap();
+        assert_eq!((f.color.width(), f.color.height()), (28, 20));
+        assert!((f.depth.at(0, 0) - 0.011).abs() < 1e-6, "file 10.png");
+        assert!((f.color.pixel(3, 3)[1] - 0.5).abs() < 0.01);
+    }
+
+    #[test]
+    fn missing_pose_files_are_reported_with_the_counts() {
+        let root = test_dir("scannet-missing");
+        for sub in ["color", "depth", "pose"] {
+            std::fs::create_dir_all(root.join(sub)).unwrap();
+        }
+        Image::from_fn(4, 3, |_, _| [0.0; 3])
+            .save_png(root.join("color/0.jpg"))
+            .unwrap();
+        DepthImage::new(4, 3, vec![1.0; 12])
+            .unwrap()
+            .save_png(&root.join("depth/0.png"), 1000.0)
+            .unwrap();
+        let err = read_scannet(&root, 1.0, 0).unwrap_err().to_string();
+        assert!(err.contains("found 1, 1 and 0"), "{err}");
+    }
+}
