@@ -208,6 +208,19 @@ fn every_config_runs_as_a_smoke_test() {
                 }
             }
         }
+        if text.contains("task = \"slam\"") && text.contains("source = \"synthetic\"") {
+            let data_dir = temp_dir("smoke-slam-room");
+            for set in [
+                "synthetic.frames=6".to_string(),
+                "synthetic.width=48".to_string(),
+                "tracking.edge=2".to_string(),
+                "tracking.pixels=32".to_string(),
+                "mapping.pixels=64".to_string(),
+                format!("data.path={}", data_dir.display()),
+            ] {
+                args.extend(["--set".into(), set]);
+            }
+        }
         if text.contains("task = \"synth_room\"") {
             let data_dir = temp_dir("smoke-room");
             for set in [

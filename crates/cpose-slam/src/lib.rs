@@ -5,5 +5,9 @@
 pub use cpose_nerf;
 
 pub mod data;
+pub mod map;
+pub mod slam;
 pub mod synth;
 mod synth_task;
+mod task;
+pub mod track;

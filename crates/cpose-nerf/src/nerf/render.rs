@@ -198,6 +198,85 @@ impl<S: Real> Renderer<S> {
                     }
                 }
             });
+        self.shade(field, settings, n)
+    }
+
+    /// Renders `rays` at the caller's sample depths `depths` (`rays × settings.samples`, each
+    /// ray's increasing, in units of its direction, e.g. spread around a measured depth), as
+    /// [`Renderer::forward`] does after sampling. `settings.sampling` is not used and
+    /// `settings.clip` must be `None`. [`Renderer::backward`] reverses it.
+    pub fn forward_at_depths(
+        &mut self,
+        field: &mut dyn RadianceField<S>,
+        settings: &RenderSettings,
+        rays: &[CameraRay],
+        depths: &[S],
+    ) -> &[Composited<S>] {
+        let (n, k) = (rays.len(), settings.samples);
+        assert_eq!(depths.len(), n * k, "rays × samples depths");
+        assert!(
+            settings.clip.is_none(),
+            "caller-chosen depths are not clipped"
+        );
+        grow(&mut self.depths, n * k).copy_from_slice(depths);
+        let points = grow(&mut self.points, 3 * n * k);
+        let norms = grow(&mut self.norms, n);
+        for (r, ray) in rays.iter().enumerate() {
+            let (o, d) = (ray.origin, ray.direction);
+            norms[r] = S::from_f64(Vector3::from(d).norm());
+            for j in 0..k {
+                let s = depths[r * k + j].to_f64();
+                for c in 0..3 {
+                    points[3 * (r * k + j) + c] = S::from_f64(o[c] + s * d[c]);
+                }
+            }
+        }
+        self.shade(field, settings, n)
+    }
+
+    /// The depth variance `Var = Σ_j w_j (s_j − D)²` of each ray of the last forward pass
+    /// (`samples` per ray, `D` its composited depth) into `out` (NICE-SLAM's tracking weight;
+    /// a constant for the gradient, as there).
+    pub fn depth_variances(&self, samples: usize, out: &mut [S]) {
+        let k = samples;
+        for (r, v) in out.iter_mut().enumerate() {
+            let (sigma, depths) = (
+                &self.sigma[r * k..(r + 1) * k],
+                &self.depths[r * k..(r + 1) * k],
+            );
+            let depth = self.out[r].depth;
+            let mut trans = S::ONE;
+            let mut acc = S::ZERO;
+            for j in 0..k {
+                let delta = if j + 1 < k {
+                    (depths[j + 1] - depths[j]) * self.norms[r]
+                } else {
+                    S::from_f64(crate::volume::LAST_DELTA) * self.norms[r]
+                };
+                let e = Real::exp(-sigma[j] * delta);
+                let w = trans * (S::ONE - e);
+                trans *= e;
+                let dev = depths[j] - depth;
+                acc += w * dev * dev;
+            }
+            *v = acc;
+        }
+    }
+
+    /// The field at the points of the last sampling, then compositing.
+    fn shade(
+        &mut self,
+        field: &mut dyn RadianceField<S>,
+        settings: &RenderSettings,
+        n: usize,
+    ) -> &[Composited<S>] {
+        let k = settings.samples;
+        let clip = settings.metric_clip();
+        let (points, depths, norms) = (
+            &self.points[..3 * n * k],
+            &self.depths[..n * k],
+            &self.norms[..n],
+        );
         let sigma = grow(&mut self.sigma, n * k);
         let rgb = grow(&mut self.rgb, 3 * n * k);
         field.forward(points, sigma, rgb);
