@@ -21,7 +21,7 @@ use cpose_slam as _;
 
 use std::ffi::OsString;
 use std::io::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context as _;
@@ -90,7 +90,12 @@ struct AteArgs {
 #[derive(Debug, clap::Args)]
 struct RunArgs {
     /// The config file (TOML: `task = "…"`, an optional `[run]` table, the task's tables).
-    config: PathBuf,
+    #[arg(required_unless_present = "resume")]
+    config: Option<PathBuf>,
+    /// Continue the interrupted run in DIR from its checkpoints, with its resolved
+    /// `config.toml` (tasks without checkpoints run again from the start).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["config", "overrides", "out"])]
+    resume: Option<PathBuf>,
     /// Override a config value, e.g. `--set run.seed=3 --set model.width=64` (the value is
     /// read as TOML, else as a string). Repeatable.
     #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -188,15 +193,26 @@ fn list() -> Result<(), Failure> {
 fn run(args: &RunArgs) -> Result<(), Failure> {
     registry::check_unique().map_err(|e| Failure::Run(e.into()))?;
     let usage = |e: anyhow::Error| Failure::Usage(e);
-    let config = Config::load(&args.config, &args.overrides).map_err(|e| usage(e.into()))?;
+    let (config_path, out, allow_existing) = match (&args.resume, &args.config) {
+        (Some(dir), _) => (dir.join("config.toml"), Some(dir.clone()), true),
+        (None, Some(config)) => (config.clone(), args.out.clone(), args.force),
+        (None, None) => unreachable!("clap requires a config unless --resume is given"),
+    };
+    if args.resume.is_some() && !config_path.is_file() {
+        return Err(usage(anyhow::anyhow!(
+            "--resume {}: not a run folder (no config.toml in it)",
+            out.as_deref().unwrap_or(Path::new("")).display()
+        )));
+    }
+    let config = Config::load(&config_path, &args.overrides).map_err(|e| usage(e.into()))?;
     let run_config = config.run_config().map_err(|e| usage(e.into()))?;
     let task = registry::task_for(&config).map_err(|e| usage(e.into()))?;
     run_config.init_thread_pool();
 
     let options = RunDirOptions {
-        out: args.out.clone(),
+        out,
         config_out_dir: run_config.out_dir.clone(),
-        allow_existing: args.force,
+        allow_existing,
         echo_log: !args.quiet,
     };
     let run_dir = RunDir::create(task.name, &options).map_err(|e| usage(e.into()))?;
@@ -204,9 +220,14 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
         .write_config(&config)
         .map_err(|e| Failure::Run(e.into()))?;
     run_dir.log(format_args!(
-        "task {} with config {}",
+        "task {} with config {}{}",
         task.name,
-        args.config.display()
+        config_path.display(),
+        if args.resume.is_some() {
+            " (resumed)"
+        } else {
+            ""
+        }
     ));
 
     let input = TaskInput {
@@ -214,6 +235,7 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
         run_dir: &run_dir,
         run: &run_config,
         show_progress: !args.quiet,
+        resume: args.resume.is_some(),
     };
     let result = (task.run)(&input).with_context(|| {
         format!(

@@ -4,6 +4,7 @@
 
 pub use cpose_nerf;
 
+pub mod checkpoint;
 pub mod data;
 pub mod map;
 pub mod slam;

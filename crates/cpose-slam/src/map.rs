@@ -23,6 +23,8 @@ use cpose_nerf::volume::{Composited, Sampling};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::{Reader, Writer};
+
 /// Weight of the colour term in mapping (NICE-SLAM: 0.2).
 pub const MAPPING_COLOR_WEIGHT: f32 = 0.2;
 
@@ -186,22 +188,31 @@ impl NeuralMap {
         })
     }
 
-    /// The field's parameters (for checkpoints).
-    pub fn params(&self) -> &[f32] {
-        self.field.params()
+    /// Writes the field's parameters and its optimiser's state.
+    pub fn save(&self, w: &mut Writer) {
+        w.f32s(self.field.params());
+        let (m, v, t) = self.adam.state();
+        w.f32s(m);
+        w.f32s(v);
+        w.u64(t);
     }
 
-    /// Overwrites the field's parameters (from a checkpoint of the same config).
-    pub fn set_params(&mut self, values: &[f32]) -> Result<(), String> {
+    /// Restores [`NeuralMap::save`] of a map with the same config.
+    pub fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        let params = r.f32s()?;
         let p = self.field.params_mut();
-        if p.len() != values.len() {
-            return Err(format!(
-                "the checkpoint holds {} map parameters, the map has {}",
-                values.len(),
+        if p.len() != params.len() {
+            anyhow::bail!(
+                "the checkpoint holds {} map parameters, this map has {} (another [map] config?)",
+                params.len(),
                 p.len()
-            ));
+            );
         }
-        p.copy_from_slice(values);
+        p.copy_from_slice(&params);
+        let (m, v, t) = (r.f32s()?, r.f32s()?, r.u64()?);
+        if !self.adam.set_state(&m, &v, t) {
+            anyhow::bail!("the checkpoint's map optimiser does not match this map");
+        }
         Ok(())
     }
 

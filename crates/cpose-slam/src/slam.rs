@@ -11,6 +11,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::{Reader, Writer};
 use crate::data::RgbdFrame;
 use crate::map::{NeuralMap, PixelSample};
 use crate::track::PoseModel;
@@ -139,6 +140,34 @@ impl Slam {
             pixels: Vec::new(),
             pose_grads: Vec::new(),
         })
+    }
+
+    /// Writes the run's state after its last processed frame: estimates, keyframes, map.
+    pub fn save(&self, w: &mut Writer) {
+        w.poses(&self.estimates);
+        w.f64s(
+            &self
+                .keyframes
+                .iter()
+                .map(|(i, _)| *i as f64)
+                .collect::<Vec<_>>(),
+        );
+        self.map.save(w);
+    }
+
+    /// Restores [`Slam::save`]; `frame(i)` reloads the keyframes' data.
+    pub fn load(
+        &mut self,
+        r: &mut Reader,
+        mut frame: impl FnMut(usize) -> anyhow::Result<RgbdFrame>,
+    ) -> anyhow::Result<()> {
+        self.estimates = r.poses()?;
+        self.keyframes.clear();
+        for i in r.f64s()? {
+            let i = i as usize;
+            self.keyframes.push((i, frame(i)?));
+        }
+        self.map.load(r)
     }
 
     /// A generator for frame `index` and stage `stage`: runs are reproducible frame by frame.
@@ -279,7 +308,7 @@ impl Slam {
 
 /// Samples up to `n` pixels with a depth reading, uniformly inside the `edge` border, as rays
 /// of camera `camera_index` at `pose` (at most `4n` draws).
-fn sample_pixels<R: RngExt + ?Sized>(
+pub fn sample_pixels<R: RngExt + ?Sized>(
     frame: &RgbdFrame,
     camera: &PinholeCamera,
     pose: &Isometry3<f64>,

@@ -8,8 +8,8 @@
 //!   on it, a cabinet, a lamp pillar, boxes, a ball, a rug and a picture on the wall.
 //! * **Camera**: Replica's (90° horizontal field of view) at a chosen width, `300 × 170` by
 //!   default (a quarter of Replica's 1200 × 680).
-//! * **Motion** ([`RoomMotion`]): a built-in hand-held walk (slow sums of sines: ±0.8 m, ±35° of
-//!   yaw, smaller pitch and roll), or any recorded trajectory such as TUM's `groundtruth.txt`,
+//! * **Motion** ([`RoomMotion`]): a built-in hand-held walk (per axis a sum of four sines at
+//!   0.03–0.25 Hz, up to ±0.8 m and ±35°; about 0.3 m/s, like TUM's fr1 sequences), or any recorded trajectory such as TUM's `groundtruth.txt`,
 //!   replayed relative to its first pose from the room's start pose.
 //! * **Depth noise** (Nguyen, Izadi and Lovell 2012, the Kinect's axial model):
 //!   `z̃ = z + N(0, σ(z)²)`, `σ(z) = 0.0012 + 0.0019 (z − 0.4)²` m; no reading (0) where the
@@ -175,7 +175,7 @@ impl RoomMotion {
                     0.8,
                     35f64.to_radians(),
                     0.03,
-                    0.4,
+                    0.25,
                 )
                 .expect("the walk's constants are valid");
                 MotionKind::Handheld(motion)

@@ -1,7 +1,8 @@
 //! Task `slam`: RGB-D neural SLAM on a Replica, ScanNet or TUM-RGBD sequence, or on the
 //! synthetic room (generated on first use), once per tracking method: NICE-SLAM's free pose
-//! (`baseline`) and PoseNet relative to the previous camera (`prev`), the first camera (`world`)
-//! or a randomly perturbed previous camera (`random`). Writes the trajectories in TUM format,
+//! (`baseline`), PoseNet relative to the previous camera (`prev`), the first camera (`world`)
+//! or a randomly perturbed previous camera (`random`), and the intrinsic motion frame
+//! (`intrinsic`, two PoseNets with the DOF loss). Writes the trajectories in TUM format,
 //! the ATE (SE(3) alignment, as `cpose eval ate`), a top-down plot and a rendered view.
 
 use std::collections::BTreeMap;
@@ -20,11 +21,15 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::{Reader, Writer};
 use crate::data::{RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
 use crate::map::{MapConfig, NeuralMap, PixelSample};
 use crate::slam::{MappingConfig, Slam, TrackingConfig};
 use crate::synth::{RoomConfig, generate_room};
-use crate::track::{FreePose, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference};
+use crate::track::{
+    FreePose, IntrinsicConfig, IntrinsicTracker, PoseModel, PoseNetTrackConfig, PoseNetTracker,
+    Reference,
+};
 
 inventory::submit! {
     Task {
@@ -50,6 +55,8 @@ struct Experiment {
     mapping: MappingConfig,
     #[serde(default)]
     posenet: PoseNetTrackConfig,
+    #[serde(default)]
+    intrinsic: IntrinsicConfig,
     slam: SlamConfig,
 }
 
@@ -91,20 +98,44 @@ enum Source {
     Tum,
 }
 
-/// The map's region: a ball (the grid covers its cube). Default: the synthetic room.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
+/// The map's region: either an axis-aligned box (`box = [[x0, x1], [y0, y1], [z0, z1]]`, as
+/// NICE-SLAM's `mapping.bound`) or a ball (`centre`, `radius`); the grid covers the cube around
+/// it. Default: the synthetic room.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct BoundsConfig {
-    centre: [f64; 3],
-    radius: f64,
+    centre: Option<[f64; 3]>,
+    radius: Option<f64>,
+    #[serde(rename = "box")]
+    aabb: Option<[[f64; 2]; 3]>,
 }
 
-impl Default for BoundsConfig {
-    fn default() -> Self {
-        Self {
-            centre: [0.0, 0.0, 1.4],
-            radius: 3.3,
-        }
+impl BoundsConfig {
+    fn scene_bounds(&self) -> anyhow::Result<SceneBounds> {
+        let (centre, radius) = match (self.aabb, self.centre, self.radius) {
+            (Some(b), None, None) => {
+                if b.iter()
+                    .any(|[lo, hi]| lo.partial_cmp(hi) != Some(std::cmp::Ordering::Less))
+                {
+                    bail!("bounds.box = {b:?}: every axis needs [min, max] with min < max");
+                }
+                let centre = b.map(|[lo, hi]| 0.5 * (lo + hi));
+                let radius = b.iter().map(|[lo, hi]| 0.5 * (hi - lo)).fold(0.0, f64::max);
+                (centre, radius)
+            }
+            (None, Some(c), Some(r)) => (c, r),
+            (None, None, None) => ([0.0, 0.0, 1.4], 3.3),
+            _ => bail!(
+                "[bounds]: give either box = [[x0, x1], [y0, y1], [z0, z1]] or centre and radius"
+            ),
+        };
+        let bounds = SceneBounds {
+            centre,
+            radius,
+            unbounded: false,
+        };
+        bounds.validate()?;
+        Ok(bounds)
     }
 }
 
@@ -112,6 +143,14 @@ impl Default for BoundsConfig {
 #[serde(deny_unknown_fields)]
 struct SlamConfig {
     methods: Vec<Method>,
+    /// Write a checkpoint every this many frames (0: never); `cpose run --resume` continues
+    /// from it.
+    #[serde(default = "fifty")]
+    checkpoint_every: usize,
+}
+
+fn fifty() -> usize {
+    50
 }
 
 /// A tracking method and its key in `metrics.json`.
@@ -122,6 +161,7 @@ enum Method {
     Prev,
     World,
     Random,
+    Intrinsic,
 }
 
 impl Method {
@@ -131,6 +171,7 @@ impl Method {
             Method::Prev => "prev",
             Method::World => "world",
             Method::Random => "random",
+            Method::Intrinsic => "intrinsic",
         }
     }
 }
@@ -145,6 +186,9 @@ struct MethodResult {
     first_lost: Option<usize>,
     fps: f64,
     wall_s: f64,
+    /// Model-specific extras (the intrinsic frame's mean effective DOF).
+    #[serde(flatten)]
+    extra: BTreeMap<String, f64>,
 }
 
 fn open_sequence(exp: &Experiment, input: &TaskInput) -> anyhow::Result<RgbdSequence> {
@@ -173,11 +217,17 @@ fn open_sequence(exp: &Experiment, input: &TaskInput) -> anyhow::Result<RgbdSequ
     Ok(seq)
 }
 
+/// Bumped whenever the room, the walk or the noise model changes, so stale data is rebuilt.
+const GENERATOR_VERSION: &str = "synthetic room v1";
+
 /// Generates the synthetic room into `path` unless it already holds this exact configuration
 /// (recorded in `synthetic.json` once every frame is written).
 fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyhow::Result<()> {
     let stamp = path.join("synthetic.json");
-    let wanted = serde_json::to_string_pretty(config)?;
+    let wanted = serde_json::to_string_pretty(&serde_json::json!({
+        "generator": GENERATOR_VERSION,
+        "synthetic": config,
+    }))?;
     if std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted) {
         input
             .run_dir
@@ -212,7 +262,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         *steps = input.run.iterations(*steps).max(1);
     }
     if exp.slam.methods.is_empty() {
-        bail!("slam.methods is empty: name at least one of baseline, prev, world, random");
+        bail!(
+            "slam.methods is empty: name at least one of baseline, prev, world, random, intrinsic"
+        );
     }
     let seq = open_sequence(&exp, input)?;
     let n = if exp.data.frames == 0 {
@@ -249,16 +301,26 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         exp.slam.methods.iter().map(|m| m.key()).collect::<Vec<_>>()
     ));
     let start = truth[0].unwrap_or_else(Isometry3::identity);
-    let bounds = SceneBounds {
-        centre: exp.bounds.centre,
-        radius: exp.bounds.radius,
-        unbounded: false,
-    };
-    bounds.validate()?;
+    let bounds = exp.bounds.scene_bounds()?;
     let range = TimeRange::new(times[0], times[n - 1])
         .context("frame times must increase from the first to the last frame")?;
-    let mut results = BTreeMap::new();
+    // On resume, methods already in metrics.json are done.
+    let metrics_path = input.run_dir.file("metrics.json");
+    let mut results: BTreeMap<String, serde_json::Value> = if input.resume {
+        std::fs::read_to_string(&metrics_path)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok())
+            .unwrap_or_default()
+    } else {
+        BTreeMap::new()
+    };
     for &method in &exp.slam.methods {
+        if results.contains_key(method.key()) {
+            input
+                .run_dir
+                .log(format_args!("{}: finished before the resume", method.key()));
+            continue;
+        }
         let started = Instant::now();
         let map = NeuralMap::new(&exp.map, bounds).map_err(|m| anyhow::anyhow!("map: {m}"))?;
         let mut slam = Slam::new(map, seq.camera, &exp.tracking, &exp.mapping, input.run.seed)?;
@@ -280,10 +342,40 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     input.run.seed,
                 )?)
             }
+            Method::Intrinsic => {
+                let c = &seq.camera;
+                let view_angle = 2.0 * (0.5 * c.width as f64 / c.fx).atan();
+                Box::new(IntrinsicTracker::new(
+                    &exp.posenet,
+                    &exp.intrinsic,
+                    range,
+                    view_angle,
+                    input.run.seed,
+                )?)
+            }
         };
+        let checkpoint = input
+            .run_dir
+            .file(format!("checkpoint_{}.bin", method.key()));
+        let mut lost: Vec<usize> = Vec::new();
+        let (mut first, mut earlier_s) = (0, 0.0);
+        if input.resume && checkpoint.is_file() {
+            let mut r = Reader::open(&checkpoint)?;
+            first = r.u64()? as usize;
+            lost = r.f64s()?.into_iter().map(|i| i as usize).collect();
+            earlier_s = r.f64()?;
+            slam.load(&mut r, |i| Ok(seq.load(i)?))?;
+            model.load(&mut r)?;
+            input.run_dir.log(format_args!(
+                "{}: resumed after frame {first} from {}",
+                method.key(),
+                checkpoint.display()
+            ));
+        }
         let progress = input.progress(n as u64, method.key());
-        let mut lost = Vec::new();
-        for i in 0..n {
+        progress.set_position(first as u64);
+        let every = exp.slam.checkpoint_every;
+        for i in first..n {
             let frame = seq.load(i)?;
             let report = slam.process(frame, start, model.as_mut())?;
             if let Some(r) = report
@@ -300,6 +392,15 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 lost.push(i);
             }
             progress.inc(1);
+            if every > 0 && (i + 1) % every == 0 && i + 1 < n {
+                let mut w = Writer::new();
+                w.u64((i + 1) as u64);
+                w.f64s(&lost.iter().map(|&i| i as f64).collect::<Vec<_>>());
+                w.f64(earlier_s + started.elapsed().as_secs_f64());
+                slam.save(&mut w);
+                model.save(&mut w);
+                w.save(&checkpoint)?;
+            }
             if (i + 1) % 100 == 0 || i + 1 == n {
                 let err = truth[i].map_or(f64::NAN, |t| {
                     (t.translation.vector - slam.estimates[i].translation.vector).norm()
@@ -309,12 +410,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     method.key(),
                     i + 1,
                     100.0 * err,
-                    (i + 1) as f64 / started.elapsed().as_secs_f64()
+                    (i + 1 - first) as f64 / started.elapsed().as_secs_f64()
                 ));
             }
         }
         progress.finish();
-        let wall_s = started.elapsed().as_secs_f64();
+        let wall_s = earlier_s + started.elapsed().as_secs_f64();
         let est = Trajectory::new(
             valid.iter().map(|&i| times[i]).collect(),
             valid.iter().map(|&i| slam.estimates[i]).collect(),
@@ -341,6 +442,11 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             first_lost: lost.first().copied(),
             fps: n as f64 / wall_s,
             wall_s,
+            extra: model
+                .metrics()
+                .into_iter()
+                .map(|(k, v)| (k.to_string(), v))
+                .collect(),
         };
         input.run_dir.log(format_args!(
             "{}: ATE RMSE {:.2} cm (mean {:.2}, max {:.2}), {:.2} frames/s, {:.0} s",
@@ -351,8 +457,10 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             result.fps,
             wall_s
         ));
-        results.insert(method.key().to_string(), result);
+        results.insert(method.key().to_string(), serde_json::to_value(&result)?);
         input.run_dir.write_json("metrics.json", &results)?;
+        // Finished: its checkpoint (the map, megabytes) is no longer needed.
+        let _ = std::fs::remove_file(&checkpoint);
     }
     Ok(())
 }

@@ -24,6 +24,8 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::{Reader, Writer};
+
 /// A parametrisation of the tracked pose.
 pub trait PoseModel: Send {
     /// Starts tracking frame `index` at `time` (seconds) given the estimates of the frames before
@@ -40,14 +42,18 @@ pub trait PoseModel: Send {
     fn step(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()>;
     /// Ends frame `index` with its chosen pose (the best-loss candidate).
     fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()>;
-    /// Parameters to checkpoint (flat).
-    fn state(&self) -> Vec<f32> {
-        Vec::new()
+    /// Writes what a resumed run needs to continue exactly (nothing for a per-frame model).
+    fn save(&self, w: &mut Writer) {
+        let _ = w;
     }
-    /// Restores [`PoseModel::state`].
-    fn restore(&mut self, state: &[f32]) -> anyhow::Result<()> {
-        let _ = state;
+    /// Restores [`PoseModel::save`].
+    fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        let _ = r;
         Ok(())
+    }
+    /// Extra metrics of the run so far, `(key, value)`.
+    fn metrics(&self) -> Vec<(&'static str, f64)> {
+        Vec::new()
     }
 }
 
@@ -199,6 +205,8 @@ pub struct PoseNetTracker {
     /// `(t_j, T_ref_j⁻¹ T_j)` of every tracked frame.
     memory: Vec<(f64, Isometry3<f64>)>,
     first: Isometry3<f64>,
+    seed: u64,
+    /// Drawn afresh for each frame from `seed` and its index (resumable runs).
     rng: ChaCha8Rng,
 }
 
@@ -227,7 +235,8 @@ impl PoseNetTracker {
             time: 0.0,
             memory: Vec::new(),
             first: Isometry3::identity(),
-            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_7AC4),
+            seed,
+            rng: ChaCha8Rng::seed_from_u64(seed),
         })
     }
 
@@ -298,6 +307,7 @@ impl PoseModel for PoseNetTracker {
         history: &[Isometry3<f64>],
     ) -> anyhow::Result<Isometry3<f64>> {
         self.first = history[0];
+        self.reseed(index);
         self.current_ref = match self.reference {
             Reference::Previous => history[index - 1],
             Reference::World => self.first,
@@ -330,9 +340,66 @@ impl PoseModel for PoseNetTracker {
         // T = A ∘ P: q = q_A ⊗ q_P, t = R_A t_P + t_A, so ∂L/∂q_P = q_A* ⊗ ∂L/∂q and
         // ∂L/∂t_P = R_Aᵀ ∂L/∂t (left multiplication by a unit quaternion is orthogonal).
         let a = &self.current_ref;
+        let gq = a.rotation.conjugate().into_inner() * grad_q;
+        let gt = a.rotation.inverse() * grad_t;
+        self.step_relative(&gq, &gt)
+    }
+
+    fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        let rel = self.current_ref.inverse() * pose;
+        self.memorise(time, rel)
+    }
+
+    fn save(&self, w: &mut Writer) {
+        w.f32s(&self.state());
+        let (m, v, t) = self.adam.state();
+        w.f32s(m);
+        w.f32s(v);
+        w.u64(t);
+        w.f64s(&self.memory.iter().map(|m| m.0).collect::<Vec<_>>());
+        w.poses(&self.memory.iter().map(|m| m.1).collect::<Vec<_>>());
+    }
+
+    fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        self.restore(&r.f32s()?)?;
+        let (m, v, t) = (r.f32s()?, r.f32s()?, r.u64()?);
+        if !self.adam.set_state(&m, &v, t) {
+            anyhow::bail!("the checkpoint's PoseNet optimiser does not match this network");
+        }
+        let (times, poses) = (r.f64s()?, r.poses()?);
+        if times.len() != poses.len() {
+            anyhow::bail!("corrupt PoseNet memory in the checkpoint");
+        }
+        self.memory = times.into_iter().zip(poses).collect();
+        Ok(())
+    }
+}
+
+impl PoseNetTracker {
+    /// The generator of frame `index` (random references, re-fitting batches).
+    fn reseed(&mut self, index: usize) {
+        self.rng = ChaCha8Rng::seed_from_u64(
+            (self.seed ^ 0x5EED_7AC4).wrapping_add((index as u64).wrapping_mul(0x9E37_79B9)),
+        );
+    }
+
+    /// The network's parameters, flat.
+    pub fn state(&self) -> Vec<f32> {
+        cpose_core::pose_field::params_to_vec(self.net.as_ref())
+    }
+
+    /// Overwrites the network's parameters from [`PoseNetTracker::state`].
+    pub fn restore(&mut self, state: &[f32]) -> anyhow::Result<()> {
+        cpose_core::pose_field::params_from_slice(self.net.as_mut(), state)?;
+        Ok(())
+    }
+
+    /// One Adam step from the cotangent `(∂L/∂q, ∂L/∂t)` of the network's own output at the
+    /// current time; re-evaluates it.
+    fn step_relative(&mut self, gq: &Quaternion<f64>, gt: &Vector3<f64>) -> anyhow::Result<()> {
         self.cotangent.reset(1, Order::Pose);
-        self.cotangent.rotation[0] = a.rotation.conjugate().into_inner() * grad_q;
-        self.cotangent.translation[0] = a.rotation.inverse() * grad_t;
+        self.cotangent.rotation[0] = *gq;
+        self.cotangent.translation[0] = *gt;
         self.grad.fill(0.0);
         self.net
             .backward(&[self.time], &self.cotangent, &mut self.grad)?;
@@ -348,18 +415,283 @@ impl PoseModel for PoseNetTracker {
         self.evaluate()
     }
 
-    fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
-        self.memory.push((time, self.current_ref.inverse() * pose));
+    /// Keeps `(time, relative)` as the network's target there and re-fits it on its memory.
+    fn memorise(&mut self, time: f64, relative: Isometry3<f64>) -> anyhow::Result<()> {
+        self.memory.push((time, relative));
         self.refit()
     }
+}
 
-    fn state(&self) -> Vec<f32> {
-        cpose_core::pose_field::params_to_vec(self.net.as_ref())
+/// The rotation vector `ω = θ n` of a unit quaternion `q = (w, u)` with `w ≥ 0` and its Jacobian
+/// with respect to `(w, u)`: `ω = s(r, w) u`, `r = ‖u‖`, `s = 2 atan2(r, w)/r`, so
+/// `∂ω/∂u = s I + (∂s/∂r) u uᵀ/r` and `∂ω/∂w = (∂s/∂w) u` with `∂s/∂w = −2/(r² + w²)` and
+/// `∂s/∂r = 2 (r w/(r² + w²) − atan2(r, w))/r²` (`→ −4r/(3w³)` as `r → 0`, where `s → 2/w`).
+fn rotation_vector_jacobian(q: &Quaternion<f64>) -> (Vector3<f64>, nalgebra::Matrix3x4<f64>) {
+    let (w, u) = (q.w, q.imag());
+    let r = u.norm();
+    let n2 = r * r + w * w;
+    let (s, ds_dr) = if r < 1e-6 {
+        (2.0 / w, -4.0 * r / (3.0 * w * w * w))
+    } else {
+        let a = r.atan2(w);
+        (2.0 * a / r, 2.0 * (r * w / n2 - a) / (r * r))
+    };
+    let ds_dw = -2.0 / n2;
+    let omega = u * s;
+    let mut jac = nalgebra::Matrix3x4::zeros();
+    jac.set_column(0, &(u * ds_dw));
+    let du = nalgebra::Matrix3::identity() * s
+        + if r > 0.0 {
+            u * u.transpose() * (ds_dr / r)
+        } else {
+            nalgebra::Matrix3::zeros()
+        };
+    jac.fixed_view_mut::<3, 3>(0, 1).copy_from(&du);
+    (omega, jac)
+}
+
+/// The paper's DOF loss of an intrinsic motion `T_I = (q, v)` (§3.3, ℓ₀ relaxed to ℓ₁):
+/// `Σ_k |2 ω_k/γ| + Σ_k |v_k|/(‖v‖ + ε)` with `ω` the rotation vector of `q` (the paper's Euler
+/// angles, equal to first order for inter-frame rotations), `γ` the view angle and `ε = 10⁻⁴` m;
+/// returns the loss and its raw partials `(∂/∂q, ∂/∂v)`.
+pub fn dof_loss(
+    q: &Quaternion<f64>,
+    v: &Vector3<f64>,
+    view_angle: f64,
+) -> (f64, Quaternion<f64>, Vector3<f64>) {
+    let flip = if q.w < 0.0 { -1.0 } else { 1.0 };
+    let (omega, jac) = rotation_vector_jacobian(&(q * flip));
+    let k = 2.0 / view_angle;
+    let g_omega = omega.map(|x| k * sign(x));
+    let gq = jac.transpose() * g_omega * flip;
+    let norm = v.norm() + DOF_EPS;
+    let sign = v.map(sign);
+    let l1 = v.abs().sum();
+    // ∂/∂v of Σ|v_k|/(‖v‖ + ε) = sign/(‖v‖ + ε) − Σ|v_k| v/(‖v‖ (‖v‖ + ε)²).
+    let gv = if v.norm() > 0.0 {
+        sign / norm - v * (l1 / (v.norm() * norm * norm))
+    } else {
+        sign / norm
+    };
+    let loss = k * omega.abs().sum() + l1 / norm;
+    (loss, Quaternion::new(gq[0], gq[1], gq[2], gq[3]), gv)
+}
+
+/// The sign, `0` at `0` (the subgradient of `|x|` there; `f64::signum(0.0)` is 1).
+fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
+
+/// `ε` of the DOF loss's translation normalisation, metres.
+const DOF_EPS: f64 = 1e-4;
+
+/// The effective DOF of a relative motion `(q, v)` (the paper's figure counts the active DOF of
+/// the motion and of the intrinsic motion): the rotation-vector components of at least a tenth
+/// of the largest, if the rotation exceeds 0.01°, plus the translation components of at least a
+/// tenth of the largest, if it exceeds 0.1 mm.
+pub fn effective_dof(q: &UnitQuaternion<f64>, v: &Vector3<f64>) -> usize {
+    let active = |x: Vector3<f64>, floor: f64| {
+        let max = x.amax();
+        if max <= floor {
+            0
+        } else {
+            x.iter().filter(|c| c.abs() >= 0.1 * max).count()
+        }
+    };
+    active(q.scaled_axis(), 0.01f64.to_radians()) + active(*v, DOF_EPS)
+}
+
+/// Intrinsic-motion tracking settings; `[intrinsic]` in a `slam` config.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IntrinsicConfig {
+    /// Weight of the DOF loss on `T_I` (in units of the summed tracking loss).
+    pub dof_weight: f64,
+    /// Weight of `L_o = ‖v_o‖₁` on the intrinsic transform's translation.
+    pub origin_weight: f64,
+    /// `f_o` is optimised only while tracking every this many frames (the paper: 10).
+    pub origin_every: usize,
+}
+
+impl Default for IntrinsicConfig {
+    fn default() -> Self {
+        Self {
+            dof_weight: 10.0,
+            origin_weight: 10.0,
+            origin_every: 10,
+        }
+    }
+}
+
+/// The paper's intrinsic motion frame (§3.3): the relative motion from the previous camera is
+/// `T_o(t) ∘ T_I(t)`, two PoseNets — the slowly changing intrinsic transform `f_o` and the
+/// low-DOF intrinsic motion `f_I` — with the DOF loss on `T_I` and `‖v_o‖₁` on `T_o`.
+pub struct IntrinsicTracker {
+    origin: PoseNetTracker,
+    motion: PoseNetTracker,
+    config: IntrinsicConfig,
+    view_angle: f64,
+    update_origin: bool,
+    prev: Isometry3<f64>,
+    /// `(effective DOF of T_o ∘ T_I, of T_I)` per tracked frame.
+    pub dof: Vec<(usize, usize)>,
+}
+
+impl IntrinsicTracker {
+    /// Two PoseNets over `range` at the identity; `view_angle` (radians) normalises the DOF loss.
+    pub fn new(
+        posenet: &PoseNetTrackConfig,
+        config: &IntrinsicConfig,
+        range: TimeRange,
+        view_angle: f64,
+        seed: u64,
+    ) -> anyhow::Result<Self> {
+        if config.origin_every == 0 {
+            anyhow::bail!("intrinsic.origin_every must be ≥ 1");
+        }
+        Ok(Self {
+            origin: PoseNetTracker::new(posenet, Reference::Previous, range, seed)?,
+            motion: PoseNetTracker::new(posenet, Reference::Previous, range, seed.wrapping_add(1))?,
+            config: config.clone(),
+            view_angle,
+            update_origin: true,
+            prev: Isometry3::identity(),
+            dof: Vec::new(),
+        })
     }
 
-    fn restore(&mut self, state: &[f32]) -> anyhow::Result<()> {
-        cpose_core::pose_field::params_from_slice(self.net.as_mut(), state)?;
+    fn relative(&self) -> Isometry3<f64> {
+        self.origin.current_rel * self.motion.current_rel
+    }
+}
+
+impl PoseModel for IntrinsicTracker {
+    fn begin(
+        &mut self,
+        index: usize,
+        time: f64,
+        history: &[Isometry3<f64>],
+    ) -> anyhow::Result<Isometry3<f64>> {
+        self.prev = history[index - 1];
+        self.update_origin = index.is_multiple_of(self.config.origin_every);
+        // Both networks only evaluate at `time`; the reference is applied here.
+        self.origin.time = time;
+        self.motion.time = time;
+        self.origin.reseed(index);
+        self.motion.reseed(index);
+        self.origin.evaluate()?;
+        self.motion.evaluate()?;
+        Ok(self.pose())
+    }
+
+    fn pose(&self) -> Isometry3<f64> {
+        self.prev * self.relative()
+    }
+
+    fn step(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()> {
+        // T = A ∘ O ∘ I. Cotangent of R = O ∘ I: as PoseNetTracker::step with reference A.
+        let a = &self.prev;
+        let gq_rel = a.rotation.conjugate().into_inner() * grad_q;
+        let gt_rel = a.rotation.inverse() * grad_t;
+        let (o, m) = (self.origin.current_rel, self.motion.current_rel);
+        // I: ∂L/∂q_I = q_O* ⊗ ∂L/∂q_R, ∂L/∂t_I = R_Oᵀ ∂L/∂t_R, plus the DOF loss.
+        let (_, dq, dv) = dof_loss(
+            &m.rotation.into_inner(),
+            &m.translation.vector,
+            self.view_angle,
+        );
+        let w = self.config.dof_weight;
+        let gq_i = o.rotation.conjugate().into_inner() * gq_rel + dq * w;
+        let gt_i = o.rotation.inverse() * gt_rel + dv * w;
+        self.motion.step_relative(&gq_i, &gt_i)?;
+        if self.update_origin {
+            // O in O ∘ I: the correction cotangent with I as the initial pose, plus ‖v_o‖₁.
+            let (gq_o, gt_o) =
+                cpose_nerf::nerf::poses::correction_cotangent(&m, &o.rotation, &gq_rel, &gt_rel);
+            let gt_o = gt_o + o.translation.vector.map(sign) * self.config.origin_weight;
+            self.origin.step_relative(&gq_o, &gt_o)?;
+        }
         Ok(())
+    }
+
+    fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        let rel = self.prev.inverse() * pose;
+        // Split the chosen relative pose at the current intrinsic transform: I = O⁻¹ R.
+        let o = self.origin.current_rel;
+        let motion = o.inverse() * rel;
+        self.dof.push((
+            effective_dof(&rel.rotation, &rel.translation.vector),
+            effective_dof(&motion.rotation, &motion.translation.vector),
+        ));
+        self.motion.memorise(time, motion)?;
+        if self.update_origin || index == 1 {
+            self.origin.memorise(time, o)?;
+        }
+        Ok(())
+    }
+
+    fn metrics(&self) -> Vec<(&'static str, f64)> {
+        let n = self.dof.len().max(1) as f64;
+        vec![
+            (
+                "dof_motion",
+                self.dof.iter().map(|d| d.0 as f64).sum::<f64>() / n,
+            ),
+            (
+                "dof_intrinsic",
+                self.dof.iter().map(|d| d.1 as f64).sum::<f64>() / n,
+            ),
+        ]
+    }
+
+    fn save(&self, w: &mut Writer) {
+        self.origin.save(w);
+        self.motion.save(w);
+        let flat: Vec<f64> = self
+            .dof
+            .iter()
+            .flat_map(|d| [d.0 as f64, d.1 as f64])
+            .collect();
+        w.f64s(&flat);
+    }
+
+    fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        self.origin.load(r)?;
+        self.motion.load(r)?;
+        self.dof = r
+            .f64s()?
+            .chunks_exact(2)
+            .map(|d| (d[0] as usize, d[1] as usize))
+            .collect();
+        Ok(())
+    }
+}
+
+impl IntrinsicTracker {
+    /// Both networks' parameters, flat (origin first).
+    pub fn state(&self) -> Vec<f32> {
+        let mut s = self.origin.state();
+        s.extend(self.motion.state());
+        s
+    }
+
+    /// Overwrites both networks' parameters from [`IntrinsicTracker::state`].
+    pub fn restore(&mut self, state: &[f32]) -> anyhow::Result<()> {
+        let n = self.origin.net.num_params();
+        if state.len() != n + self.motion.net.num_params() {
+            anyhow::bail!(
+                "{} values for the intrinsic frame's parameters",
+                state.len()
+            );
+        }
+        self.origin.restore(&state[..n])?;
+        self.motion.restore(&state[n..])
     }
 }
 
@@ -537,5 +869,141 @@ mod tests {
         }
         let after = error(&mut tracker);
         assert!(after < 0.2 * before, "{before} → {after}");
+    }
+
+    #[test]
+    fn dof_loss_matches_central_differences() {
+        let gamma = 1.2;
+        for (q, v) in [
+            (
+                Quaternion::new(0.9, 0.1, -0.3, 0.2),
+                Vector3::new(0.02, -0.01, 0.005),
+            ),
+            (
+                Quaternion::new(-0.7, 0.4, 0.1, -0.5),
+                Vector3::new(-0.3, 0.2, 0.6),
+            ),
+            // The small-angle series (‖u‖ < 10⁻⁶); the step stays below every |u_k|.
+            (
+                Quaternion::new(1.0, 4e-7, -5e-7, 3e-7),
+                Vector3::new(0.0, 0.0, 1e-3),
+            ),
+        ] {
+            let q = q.normalize();
+            let (_, gq, gv) = dof_loss(&q, &v, gamma);
+            let f = |q: Quaternion<f64>, v: Vector3<f64>| dof_loss(&q, &v, gamma).0;
+            let h = 1e-8;
+            for k in 0..4 {
+                let mut a = q.coords;
+                a[k] += h;
+                let mut b = q.coords;
+                b[k] -= h;
+                let numeric = (f(Quaternion::from(a), v) - f(Quaternion::from(b), v)) / (2.0 * h);
+                let analytic = gq.coords[k];
+                assert!(
+                    (numeric - analytic).abs() < 1e-5 * (1.0 + numeric.abs()),
+                    "q[{k}]: {analytic} vs {numeric}"
+                );
+            }
+            for k in 0..3 {
+                let (mut a, mut b) = (v, v);
+                a[k] += 1e-9;
+                b[k] -= 1e-9;
+                let numeric = (f(q, a) - f(q, b)) / 2e-9;
+                assert!(
+                    (numeric - gv[k]).abs() < 1e-4 * (1.0 + numeric.abs()),
+                    "v[{k}]: {} vs {numeric}",
+                    gv[k]
+                );
+            }
+        }
+        // One axis of rotation and one of translation: the least the loss can be for a motion.
+        let (pure, _, _) = dof_loss(
+            &UnitQuaternion::from_euler_angles(0.0, 0.1, 0.0).into_inner(),
+            &Vector3::new(0.0, 0.0, 0.05),
+            gamma,
+        );
+        let (mixed, _, _) = dof_loss(
+            &UnitQuaternion::from_scaled_axis(Vector3::new(0.0577, 0.0577, 0.0577)).into_inner(),
+            &Vector3::new(0.0289, 0.0289, 0.0289),
+            gamma,
+        );
+        assert!(pure < mixed, "{pure} vs {mixed}");
+    }
+
+    #[test]
+    fn effective_dof_counts_active_components() {
+        let yaw = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.05);
+        assert_eq!(effective_dof(&yaw, &Vector3::new(0.01, 0.0, 0.0)), 2);
+        let all = UnitQuaternion::from_scaled_axis(Vector3::new(0.02, -0.02, 0.02));
+        assert_eq!(effective_dof(&all, &Vector3::new(0.01, 0.01, -0.01)), 6);
+        assert_eq!(
+            effective_dof(&UnitQuaternion::identity(), &Vector3::zeros()),
+            0
+        );
+    }
+
+    /// The gradient the intrinsic tracker gives both networks matches central differences of
+    /// the loss of `T_prev ∘ T_o ∘ T_I` (without its DOF and origin terms, weights 0).
+    #[test]
+    fn intrinsic_gradient_matches_central_differences() {
+        let range = TimeRange::new(0.0, 1.0).unwrap();
+        let posenet = PoseNetTrackConfig {
+            network: PoseNetConfig {
+                depth: 3,
+                width: 8,
+                skip_layer: 0,
+                ..PoseNetConfig::default()
+            },
+            lr_translation: 1.0,
+            lr_rotation: 1.0,
+            ..PoseNetTrackConfig::default()
+        };
+        let config = IntrinsicConfig {
+            dof_weight: 0.0,
+            origin_weight: 0.0,
+            origin_every: 1,
+        };
+        let mut tracker = IntrinsicTracker::new(&posenet, &config, range, 1.5, 2).unwrap();
+        let mut params = tracker.state();
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        for p in &mut params {
+            *p += rng.random_range(-0.3f32..0.3);
+        }
+        tracker.restore(&params).unwrap();
+        let prev = Isometry3::from_parts(
+            Translation3::new(-0.5, 1.0, 0.3),
+            UnitQuaternion::from_euler_angles(-0.2, 0.5, 0.8),
+        );
+        tracker.begin(1, 0.6, &[prev]).unwrap();
+        let (gq, gt) = grad(&tracker.pose());
+        // One Adam step of lr 1 moves every parameter by ≈ sign(gradient): compare signs with
+        // the numeric gradient on parameters where it is clearly non-zero.
+        let before = tracker.state();
+        tracker.step(&gq, &gt).unwrap();
+        let after = tracker.state();
+        let n = params.len();
+        let mut checked = 0;
+        for k in (0..n).step_by(7) {
+            let h = 1e-3f32;
+            let mut at = |v: f32| {
+                let mut p = params.clone();
+                p[k] = v;
+                tracker.restore(&p).unwrap();
+                tracker.begin(1, 0.6, &[prev]).unwrap();
+                loss(&tracker.pose())
+            };
+            let numeric = (at(params[k] + h) - at(params[k] - h)) / (2.0 * h as f64);
+            if numeric.abs() < 1e-2 {
+                continue;
+            }
+            let moved = (after[k] - before[k]) as f64;
+            assert!(
+                moved * numeric < 0.0,
+                "param {k}: moved {moved}, gradient {numeric}"
+            );
+            checked += 1;
+        }
+        assert!(checked > 20, "{checked} parameters checked");
     }
 }

@@ -39,6 +39,22 @@ impl<S: Real> Adam<S> {
         self.t
     }
 
+    /// The state `(m, v, t)`, for checkpoints.
+    pub fn state(&self) -> (&[S], &[S], u64) {
+        (&self.m, &self.v, self.t)
+    }
+
+    /// Restores a [`Adam::state`] of the same length; `false` (and no change) otherwise.
+    pub fn set_state(&mut self, m: &[S], v: &[S], t: u64) -> bool {
+        if m.len() != self.m.len() || v.len() != self.v.len() {
+            return false;
+        }
+        self.m.copy_from_slice(m);
+        self.v.copy_from_slice(v);
+        self.t = t;
+        true
+    }
+
     /// Starts step `t + 1`; follow with [`Adam::update`] on every parameter group.
     pub fn begin_step(&mut self) {
         self.t += 1;
