@@ -32,6 +32,8 @@ fn list_prints_tasks_then_pose_fields() {
         [
             "nerf",
             "planar",
+            "slam",
+            "synth_room",
             "trajectory",
             "composed",
             "discrete",
