@@ -525,3 +525,69 @@ fn slam_resumes_after_kill_9_with_the_uninterrupted_trajectory() {
         "a finished method's checkpoint is removed"
     );
 }
+
+/// A TUM RGB-D folder without `groundtruth.txt` runs: the trajectory is written, the ATE is
+/// null in `metrics.json` and the log says why.
+#[test]
+fn slam_without_ground_truth_writes_the_trajectory_and_no_ate() {
+    let data = temp_dir("tum-no-gt");
+    std::fs::create_dir_all(data.join("rgb")).unwrap();
+    std::fs::create_dir_all(data.join("depth")).unwrap();
+    let (mut rgb, mut depth) = (String::new(), String::new());
+    for i in 0..4 {
+        let t = i as f64 * 0.05;
+        cpose_nerf::image::Image::from_fn(64, 48, |x, y| [x as f32 / 64.0, y as f32 / 48.0, 0.5])
+            .save_png(data.join(format!("rgb/{i}.png")))
+            .unwrap();
+        let depths = (0..64 * 48).map(|k| 2.0 + 0.01 * (k % 64) as f32).collect();
+        cpose_slam::data::DepthImage::new(64, 48, depths)
+            .unwrap()
+            .save_png(&data.join(format!("depth/{i}.png")), 5000.0)
+            .unwrap();
+        rgb.push_str(&format!("{t:.3} rgb/{i}.png\n"));
+        depth.push_str(&format!("{t:.3} depth/{i}.png\n"));
+    }
+    write(&data, "rgb.txt", &rgb);
+    write(&data, "depth.txt", &depth);
+    let out_dir = temp_dir("tum-no-gt-run");
+    let config = workspace_root().join("configs/tum_fr1_desk.toml");
+    let out = cpose_in(
+        &workspace_root(),
+        &[
+            "run",
+            config.to_str().unwrap(),
+            "-q",
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--set",
+            &format!("data.path={}", data.display()),
+            "--set",
+            "data.resolution=1.0",
+            "--set",
+            "slam.methods=[\"baseline\"]",
+            "--set",
+            "tracking.edge=2",
+            "--set",
+            "run.iterations_scale=0.05",
+            "--set",
+            "run.threads=1",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap())
+            .unwrap();
+    assert!(metrics["baseline"]["ate_rmse_cm"].is_null(), "{metrics}");
+    assert_eq!(
+        eval::read_tum(out_dir.join("traj_baseline.txt"))
+            .unwrap()
+            .len(),
+        4
+    );
+    let log = std::fs::read_to_string(out_dir.join("log.txt")).unwrap();
+    assert!(log.contains("no ground truth"), "{log}");
+}

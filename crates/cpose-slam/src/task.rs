@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use cpose_core::TimeRange;
-use cpose_core::eval::{Alignment, Trajectory, align_poses, ate, write_tum};
+use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, write_tum};
 use cpose_core::registry::{Task, TaskInput};
 use cpose_nerf::field3d::SceneBounds;
 use cpose_nerf::image::Image;
@@ -178,9 +178,12 @@ impl Method {
 
 #[derive(Debug, Serialize)]
 struct MethodResult {
-    ate_rmse_cm: f64,
-    ate_mean_cm: f64,
-    ate_max_cm: f64,
+    /// ATE statistics (none without ground truth).
+    ate_rmse_cm: Option<f64>,
+    ate_mean_cm: Option<f64>,
+    ate_max_cm: Option<f64>,
+    /// `"se3"`, or `"none"` where SE(3) alignment was degenerate.
+    ate_alignment: Option<&'static str>,
     frames: usize,
     lost_frames: usize,
     first_lost: Option<usize>,
@@ -283,11 +286,16 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let truth = &seq.truth[..n];
     let valid: Vec<usize> = (0..n).filter(|&i| truth[i].is_some()).collect();
     let dropped = n - valid.len();
-    let gt = Trajectory::new(
-        valid.iter().map(|&i| times[i]).collect(),
-        valid.iter().map(|&i| truth[i].expect("valid")).collect(),
-    )?;
-    write_tum(input.run_dir.file("traj_gt.txt"), &gt)?;
+    let gt = if valid.is_empty() {
+        None
+    } else {
+        let gt = Trajectory::new(
+            valid.iter().map(|&i| times[i]).collect(),
+            valid.iter().map(|&i| truth[i].expect("valid")).collect(),
+        )?;
+        write_tum(input.run_dir.file("traj_gt.txt"), &gt)?;
+        Some(gt)
+    };
     input.run_dir.log(format_args!(
         "{}: {n} frames of {}×{}{}; methods {:?}",
         seq.root.display(),
@@ -416,40 +424,37 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         }
         progress.finish();
         let wall_s = earlier_s + started.elapsed().as_secs_f64();
-        let est = Trajectory::new(
-            valid.iter().map(|&i| times[i]).collect(),
-            valid.iter().map(|&i| slam.estimates[i]).collect(),
-        )?;
         let all = Trajectory::new(times.clone(), slam.estimates.clone())?;
         write_tum(
             input.run_dir.file(format!("traj_{}.txt", method.key())),
             &all,
         )?;
-        // SE(3) alignment as NICE-SLAM and `cpose eval ate`; a short, nearly straight
-        // trajectory makes it ill-posed, and then the error is taken as it is (frame 0 starts
-        // at its true pose, so the frames already agree).
-        let alignment = match ate(&gt, &est, Alignment::Se3, 1e-6) {
-            Ok(_) => Alignment::Se3,
-            Err(e) => {
-                input.run_dir.log(format_args!(
-                    "{}: no SE(3) alignment ({e}); ATE without alignment",
-                    method.key()
-                ));
-                Alignment::None
+        let plot = input
+            .run_dir
+            .file(format!("trajectory_{}.png", method.key()));
+        let scored = match &gt {
+            Some(gt) => {
+                let est = Trajectory::new(
+                    valid.iter().map(|&i| times[i]).collect(),
+                    valid.iter().map(|&i| slam.estimates[i]).collect(),
+                )?;
+                let (report, alignment) = score(gt, &est, input, method.key())?;
+                let (_, aligned) = align_poses(gt.poses(), est.poses(), alignment)?;
+                trajectory_plot(512, gt.poses(), &[], &aligned).save_png(&plot)?;
+                Some((report, alignment))
+            }
+            None => {
+                trajectory_plot(512, &[], &[], &slam.estimates).save_png(&plot)?;
+                None
             }
         };
-        let report = ate(&gt, &est, alignment, 1e-6)?;
-        let (_, aligned) = align_poses(gt.poses(), est.poses(), alignment)?;
-        trajectory_plot(512, gt.poses(), &[], &aligned).save_png(
-            input
-                .run_dir
-                .file(format!("trajectory_{}.png", method.key())),
-        )?;
         save_view(&mut slam, &seq, n - 1, input, method.key())?;
+        let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, _)| 100.0 * f(r));
         let result = MethodResult {
-            ate_rmse_cm: 100.0 * report.rmse_m,
-            ate_mean_cm: 100.0 * report.mean_m,
-            ate_max_cm: 100.0 * report.max_m,
+            ate_rmse_cm: cm(|r| r.rmse_m),
+            ate_mean_cm: cm(|r| r.mean_m),
+            ate_max_cm: cm(|r| r.max_m),
+            ate_alignment: scored.as_ref().map(|(_, a)| a.as_str()),
             frames: n,
             lost_frames: lost.len(),
             first_lost: lost.first().copied(),
@@ -461,12 +466,18 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 .map(|(k, v)| (k.to_string(), v))
                 .collect(),
         };
+        let ate = match &scored {
+            Some((r, _)) => format!(
+                "ATE RMSE {:.2} cm (mean {:.2}, max {:.2})",
+                100.0 * r.rmse_m,
+                100.0 * r.mean_m,
+                100.0 * r.max_m
+            ),
+            None => "no ground truth, no ATE".to_string(),
+        };
         input.run_dir.log(format_args!(
-            "{}: ATE RMSE {:.2} cm (mean {:.2}, max {:.2}), {:.2} frames/s, {:.0} s",
+            "{}: {ate}, {:.2} frames/s, {:.0} s",
             method.key(),
-            result.ate_rmse_cm,
-            result.ate_mean_cm,
-            result.ate_max_cm,
             result.fps,
             wall_s
         ));
@@ -476,6 +487,26 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         let _ = std::fs::remove_file(&checkpoint);
     }
     Ok(())
+}
+
+/// The ATE of `est` against `gt` with SE(3) alignment, as NICE-SLAM and `cpose eval ate`; a
+/// short, nearly straight run makes the alignment ill-posed, and then the error is taken as it
+/// is (frame 0 starts at its true pose, so the frames already agree), and the log says so.
+fn score(
+    gt: &Trajectory,
+    est: &Trajectory,
+    input: &TaskInput,
+    key: &str,
+) -> anyhow::Result<(AteReport, Alignment)> {
+    match ate(gt, est, Alignment::Se3, 1e-6) {
+        Ok(report) => Ok((report, Alignment::Se3)),
+        Err(e) => {
+            input.run_dir.log(format_args!(
+                "{key}: no SE(3) alignment ({e}); ATE without alignment"
+            ));
+            Ok((ate(gt, est, Alignment::None, 1e-6)?, Alignment::None))
+        }
+    }
 }
 
 /// Renders frame `index` from the map at its estimated pose (samples placed by the measured
