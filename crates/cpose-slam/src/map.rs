@@ -285,15 +285,7 @@ impl NeuralMap {
             }
             self.cotangents.push(g);
         }
-        self.grad_params.fill(0.0);
-        self.renderer.backward(
-            &mut self.field,
-            &self.settings,
-            &self.rays,
-            &self.cotangents,
-            &mut self.grad_params,
-            None,
-        );
+        self.backward(None);
         self.adam.begin_step();
         let params = self.field.params_mut();
         for (range, lr) in &self.groups {
@@ -352,6 +344,13 @@ impl NeuralMap {
             }
             self.cotangents.push(g);
         }
+        self.backward(Some(pose_grads));
+        loss
+    }
+
+    /// The reverse pass of the last render from `self.cotangents`: the field's gradient into
+    /// `grad_params` (cleared first) and, if given, each camera's pose gradient.
+    fn backward(&mut self, pose_grads: Option<&mut [PoseGradient]>) {
         self.grad_params.fill(0.0);
         self.renderer.backward(
             &mut self.field,
@@ -359,8 +358,7 @@ impl NeuralMap {
             &self.rays,
             &self.cotangents,
             &mut self.grad_params,
-            Some(pose_grads),
+            pose_grads,
         );
-        loss
     }
 }

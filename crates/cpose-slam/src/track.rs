@@ -204,7 +204,6 @@ pub struct PoseNetTracker {
     time: f64,
     /// `(t_j, T_ref_j⁻¹ T_j)` of every tracked frame.
     memory: Vec<(f64, Isometry3<f64>)>,
-    first: Isometry3<f64>,
     seed: u64,
     /// Drawn afresh for each frame from `seed` and its index (resumable runs).
     rng: ChaCha8Rng,
@@ -234,7 +233,6 @@ impl PoseNetTracker {
             current_rel: Isometry3::identity(),
             time: 0.0,
             memory: Vec::new(),
-            first: Isometry3::identity(),
             seed,
             rng: ChaCha8Rng::seed_from_u64(seed),
         })
@@ -306,11 +304,10 @@ impl PoseModel for PoseNetTracker {
         time: f64,
         history: &[Isometry3<f64>],
     ) -> anyhow::Result<Isometry3<f64>> {
-        self.first = history[0];
         self.reseed(index);
         self.current_ref = match self.reference {
             Reference::Previous => history[index - 1],
-            Reference::World => self.first,
+            Reference::World => history[0],
             Reference::Random => {
                 let g = |rng: &mut ChaCha8Rng| {
                     let u1: f64 = rng.random::<f64>().max(1e-300);
