@@ -23,6 +23,7 @@ use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
 use cpose_nerf::nerf::render::{Clip, RenderSettings};
 use cpose_nerf::nerf::train::{Schedule, Trainer};
 use cpose_nerf::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
+use cpose_nerf::volume::LastInterval;
 use cpose_nerf::volume::Sampling;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
@@ -106,6 +107,7 @@ fn nerf_step(c: &mut Criterion) {
             },
         );
         let settings = RenderSettings {
+            last_interval: LastInterval::Closed,
             samples: 48,
             sampling: Sampling::Metric {
                 near: 2.0,

@@ -12,6 +12,7 @@ pub mod field2d;
 pub mod field3d;
 mod field_common;
 pub mod image;
+pub mod mesh;
 pub mod metrics;
 pub mod nerf;
 pub mod planar;

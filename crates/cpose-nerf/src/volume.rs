@@ -29,6 +29,19 @@ use rand::RngExt;
 /// The `δ` of the last sample, in units of `‖d‖` (BARF: `1e10`).
 pub const LAST_DELTA: f64 = 1e10;
 
+/// The length of a ray's last sample interval.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LastInterval {
+    /// BARF's `10¹⁰·‖d‖`: the last sample closes the ray (its weights sum to 1 unless its
+    /// `σ` is 0).
+    #[default]
+    Closed,
+    /// The spacing before it, as NICE-SLAM's rendering, whose weights need not sum to 1: a ray
+    /// through empty space stays transparent, so depth supervision has to build the surface
+    /// (a closed ray meets a measured depth with no density at all, on its last sample).
+    Open,
+}
+
 /// The `ε` of BARF's inverse-depth parametrisation, `depth = 1/(s + ε)`.
 pub const INVERSE_DEPTH_EPS: f64 = 1e-8;
 
@@ -112,13 +125,18 @@ pub struct Composited<S> {
     pub opacity: S,
 }
 
-/// `δ_j` of sample `j` (the last is `10¹⁰·‖d‖`).
+/// `δ_j` of sample `j` (the last as `last` says).
 #[inline]
-fn delta<S: Real>(depths: &[S], j: usize, ray_norm: S) -> S {
-    if j + 1 < depths.len() {
+pub(crate) fn delta<S: Real>(depths: &[S], j: usize, ray_norm: S, last: LastInterval) -> S {
+    let n = depths.len();
+    if j + 1 < n {
         (depths[j + 1] - depths[j]) * ray_norm
     } else {
-        S::from_f64(LAST_DELTA) * ray_norm
+        match last {
+            LastInterval::Closed => S::from_f64(LAST_DELTA) * ray_norm,
+            LastInterval::Open if n >= 2 => (depths[n - 1] - depths[n - 2]) * ray_norm,
+            LastInterval::Open => S::ZERO,
+        }
     }
 }
 
@@ -130,13 +148,14 @@ pub fn composite_ray<S: Real>(
     depths: &[S],
     ray_norm: S,
     background: Option<[S; 3]>,
+    last: LastInterval,
 ) -> Composited<S> {
     let n = sigma.len();
     debug_assert!(depths.len() == n && rgb.len() == 3 * n);
     let mut out = Composited::default();
     let mut trans = S::ONE;
     for j in 0..n {
-        let e = Real::exp(-sigma[j] * delta(depths, j, ray_norm));
+        let e = Real::exp(-sigma[j] * delta(depths, j, ray_norm, last));
         let w = trans * (S::ONE - e);
         trans *= e;
         for c in 0..3 {
@@ -161,6 +180,7 @@ pub fn composite_ray_backward<S: Real>(
     depths: &[S],
     ray_norm: S,
     background: Option<[S; 3]>,
+    last: LastInterval,
     grad: &Composited<S>,
     grad_sigma: &mut [S],
     grad_rgb: &mut [S],
@@ -183,7 +203,7 @@ pub fn composite_ray_backward<S: Real>(
     let mut total = S::ZERO;
     let mut trans = S::ONE;
     for j in 0..n {
-        let e = Real::exp(-sigma[j] * delta(depths, j, ray_norm));
+        let e = Real::exp(-sigma[j] * delta(depths, j, ray_norm, last));
         total += trans * (S::ONE - e) * e_of(j);
         trans *= e;
     }
@@ -191,7 +211,7 @@ pub fn composite_ray_backward<S: Real>(
     let mut prefix = S::ZERO;
     let mut trans = S::ONE;
     for j in 0..n {
-        let dj = delta(depths, j, ray_norm);
+        let dj = delta(depths, j, ray_norm, last);
         let ex = Real::exp(-sigma[j] * dj);
         let w = trans * (S::ONE - ex);
         let next = trans * ex;
@@ -214,6 +234,7 @@ pub fn composite_batch<S: Real>(
     depths: &[S],
     ray_norms: &[S],
     background: Option<[S; 3]>,
+    last: LastInterval,
     out: &mut [Composited<S>],
 ) {
     check_batch(samples, sigma, rgb, depths, ray_norms, out.len());
@@ -225,6 +246,7 @@ pub fn composite_batch<S: Real>(
             &depths[s..e],
             ray_norms[r],
             background,
+            last,
         );
     }
 }
@@ -238,6 +260,7 @@ pub fn composite_batch_backward<S: Real>(
     depths: &[S],
     ray_norms: &[S],
     background: Option<[S; 3]>,
+    last: LastInterval,
     grad: &[Composited<S>],
     grad_sigma: &mut [S],
     grad_rgb: &mut [S],
@@ -252,6 +275,7 @@ pub fn composite_batch_backward<S: Real>(
             &depths[s..e],
             ray_norms[r],
             background,
+            last,
             g,
             &mut grad_sigma[s..e],
             &mut grad_rgb[3 * s..3 * e],
@@ -280,6 +304,9 @@ fn check_batch<S>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// BARF's compositing, where nothing else is under test.
+    const LAST: LastInterval = LastInterval::Closed;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
@@ -318,22 +345,24 @@ mod tests {
             depth: 0.3,
             opacity: -0.8,
         };
-        for (seed, bg) in [
-            (1, None),
-            (2, Some([1.0, 0.5, 0.2])),
-            (3, Some([0.9, 0.9, 0.9])),
+        for (seed, bg, last) in [
+            (1, None, LAST),
+            (2, Some([1.0, 0.5, 0.2]), LAST),
+            (3, Some([0.9, 0.9, 0.9]), LAST),
+            (1, None, LastInterval::Open),
+            (2, Some([1.0, 0.5, 0.2]), LastInterval::Open),
         ] {
             let (sigma, rgb, depths, norm) = ray(seed);
             let mut gs = vec![0.0; N];
             let mut gc = vec![0.0; 3 * N];
-            composite_ray_backward(&sigma, &rgb, &depths, norm, bg, &g, &mut gs, &mut gc);
+            composite_ray_backward(&sigma, &rgb, &depths, norm, bg, last, &g, &mut gs, &mut gc);
             let h = 1e-6;
             for j in 0..N {
                 let (mut p, mut m) = (sigma.clone(), sigma.clone());
                 p[j] += h;
                 m[j] -= h;
-                let fd = (loss(&composite_ray(&p, &rgb, &depths, norm, bg), &g)
-                    - loss(&composite_ray(&m, &rgb, &depths, norm, bg), &g))
+                let fd = (loss(&composite_ray(&p, &rgb, &depths, norm, bg, last), &g)
+                    - loss(&composite_ray(&m, &rgb, &depths, norm, bg, last), &g))
                     / (2.0 * h);
                 assert!(
                     (fd - gs[j]).abs() < 1e-7,
@@ -345,8 +374,8 @@ mod tests {
                 let (mut p, mut m) = (rgb.clone(), rgb.clone());
                 p[i] += h;
                 m[i] -= h;
-                let fd = (loss(&composite_ray(&sigma, &p, &depths, norm, bg), &g)
-                    - loss(&composite_ray(&sigma, &m, &depths, norm, bg), &g))
+                let fd = (loss(&composite_ray(&sigma, &p, &depths, norm, bg, last), &g)
+                    - loss(&composite_ray(&sigma, &m, &depths, norm, bg, last), &g))
                     / (2.0 * h);
                 assert!((fd - gc[i]).abs() < 1e-7, "c_{i}: fd {fd} vs {}", gc[i]);
             }
@@ -369,14 +398,14 @@ mod tests {
         let bg = Some([0.3, 0.6, 0.9]);
         let mut gs = vec![0.0; N];
         let mut gc = vec![0.0; 3 * N];
-        composite_ray_backward(&sigma, &rgb, &depths, norm, bg, &g, &mut gs, &mut gc);
+        composite_ray_backward(&sigma, &rgb, &depths, norm, bg, LAST, &g, &mut gs, &mut gc);
         for j in 0..N {
             let h = if j == N - 1 { 1e-14 } else { 1e-7 };
             let (mut p, mut m) = (sigma.clone(), sigma.clone());
             p[j] += h;
             m[j] -= h;
-            let fd = (loss(&composite_ray(&p, &rgb, &depths, norm, bg), &g)
-                - loss(&composite_ray(&m, &rgb, &depths, norm, bg), &g))
+            let fd = (loss(&composite_ray(&p, &rgb, &depths, norm, bg, LAST), &g)
+                - loss(&composite_ray(&m, &rgb, &depths, norm, bg, LAST), &g))
                 / (2.0 * h);
             assert!(
                 (fd - gs[j]).abs() < 1e-5 * (1.0 + fd.abs()),
@@ -387,25 +416,42 @@ mod tests {
     }
 
     #[test]
+    fn an_open_ray_through_empty_space_stays_transparent() {
+        let depths: Vec<f64> = (0..N).map(|j| 2.0 + j as f64 * 0.25).collect();
+        let rgb = vec![0.5; 3 * N];
+        let mut sigma = vec![1e-3; N];
+        let open = composite_ray(&sigma, &rgb, &depths, 1.0, None, LastInterval::Open);
+        let closed = composite_ray(&sigma, &rgb, &depths, 1.0, None, LAST);
+        assert!(open.opacity < 0.01 && closed.opacity > 0.999);
+        // A closed ray "measures" the last sample's depth with no density at all.
+        assert!((closed.depth - depths[N - 1]).abs() < 0.01);
+        // An opaque wall at sample 3 looks the same either way.
+        sigma[3] = 1e3;
+        let open = composite_ray(&sigma, &rgb, &depths, 1.0, None, LastInterval::Open);
+        let closed = composite_ray(&sigma, &rgb, &depths, 1.0, None, LAST);
+        assert!((open.depth - closed.depth).abs() < 1e-9 && (open.depth - depths[3]).abs() < 0.01);
+    }
+
+    #[test]
     fn compositing_limits() {
         let depths: Vec<f64> = (0..N).map(|j| 2.0 + j as f64 * 0.25).collect();
         let rgb: Vec<f64> = (0..3 * N).map(|i| (i % 7) as f64 / 7.0).collect();
         // Empty space: nothing but the background.
-        let empty = composite_ray(&[0.0; N], &rgb, &depths, 1.0, Some([0.1, 0.2, 0.3]));
+        let empty = composite_ray(&[0.0; N], &rgb, &depths, 1.0, Some([0.1, 0.2, 0.3]), LAST);
         assert_eq!(empty.opacity, 0.0);
         assert_eq!(empty.rgb, [0.1, 0.2, 0.3]);
         // An opaque sample k hides everything behind it.
         let k = 5;
         let mut sigma = [0.0; N];
         sigma[k] = 1e6;
-        let c = composite_ray(&sigma, &rgb, &depths, 1.0, Some([1.0, 1.0, 1.0]));
+        let c = composite_ray(&sigma, &rgb, &depths, 1.0, Some([1.0, 1.0, 1.0]), LAST);
         assert!((c.opacity - 1.0).abs() < 1e-12 && (c.depth - depths[k]).abs() < 1e-12);
         for ch in 0..3 {
             assert!((c.rgb[ch] - rgb[3 * k + ch]).abs() < 1e-12);
         }
         // Without background C = Σ w c; weights sum to at most 1; the last sample closes the ray.
         let (sigma, rgb, depths, norm) = ray(5);
-        let c = composite_ray(&sigma, &rgb, &depths, norm, None);
+        let c = composite_ray(&sigma, &rgb, &depths, norm, None, LAST);
         assert!((c.opacity - 1.0).abs() < 1e-12);
         assert!(c.depth >= depths[0] && c.depth <= depths[N - 1]);
     }
@@ -426,13 +472,14 @@ mod tests {
         let bg32 = Some([1.0f32, 0.5, 0.2]);
         let (sigma, rgb, depths, norm) = ray(6);
         let to32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
-        let c = composite_ray(&sigma, &rgb, &depths, norm, bg);
+        let c = composite_ray(&sigma, &rgb, &depths, norm, bg, LAST);
         let c32 = composite_ray(
             &to32(&sigma),
             &to32(&rgb),
             &to32(&depths),
             norm as f32,
             bg32,
+            LAST,
         );
         for k in 0..3 {
             assert!((c.rgb[k] - c32.rgb[k] as f64).abs() < 1e-5);
@@ -441,7 +488,7 @@ mod tests {
         assert!((c.opacity - c32.opacity as f64).abs() < 1e-5);
         let (mut gs, mut gc) = (vec![0.0; N], vec![0.0; 3 * N]);
         let (mut gs32, mut gc32) = (vec![0.0f32; N], vec![0.0f32; 3 * N]);
-        composite_ray_backward(&sigma, &rgb, &depths, norm, bg, &g, &mut gs, &mut gc);
+        composite_ray_backward(&sigma, &rgb, &depths, norm, bg, LAST, &g, &mut gs, &mut gc);
         let (s32, r32, d32) = (to32(&sigma), to32(&rgb), to32(&depths));
         composite_ray_backward(
             &s32,
@@ -449,6 +496,7 @@ mod tests {
             &d32,
             norm as f32,
             bg32,
+            LAST,
             &g32,
             &mut gs32,
             &mut gc32,
@@ -477,7 +525,7 @@ mod tests {
         }
         let bg = Some([0.2, 0.4, 0.6]);
         let mut out = vec![Composited::default(); rays];
-        composite_batch(N, &sigma, &rgb, &depths, &norms, bg, &mut out);
+        composite_batch(N, &sigma, &rgb, &depths, &norms, bg, LAST, &mut out);
         let grads: Vec<Composited<f64>> = (0..rays)
             .map(|r| Composited {
                 rgb: [r as f64, 0.5, -0.2],
@@ -487,7 +535,7 @@ mod tests {
             .collect();
         let (mut gs, mut gc) = (vec![0.0; rays * N], vec![0.0; 3 * rays * N]);
         composite_batch_backward(
-            N, &sigma, &rgb, &depths, &norms, bg, &grads, &mut gs, &mut gc,
+            N, &sigma, &rgb, &depths, &norms, bg, LAST, &grads, &mut gs, &mut gc,
         );
         for r in 0..rays {
             let (s, e) = (r * N, (r + 1) * N);
@@ -497,6 +545,7 @@ mod tests {
                 &depths[s..e],
                 norms[r],
                 bg,
+                LAST,
             );
             assert_eq!(out[r], single);
             let (mut gs1, mut gc1) = (vec![0.0; N], vec![0.0; 3 * N]);
@@ -506,6 +555,7 @@ mod tests {
                 &depths[s..e],
                 norms[r],
                 bg,
+                LAST,
                 &grads[r],
                 &mut gs1,
                 &mut gc1,

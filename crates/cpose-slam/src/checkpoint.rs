@@ -8,7 +8,7 @@ use anyhow::{Context as _, bail};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 /// The first line of every checkpoint.
-const HEADER: &[u8] = b"cpose-slam checkpoint v1\n";
+const HEADER: &[u8] = b"cpose-slam checkpoint v2\n";
 
 /// Builds a checkpoint in memory.
 #[derive(Default)]

@@ -18,8 +18,9 @@ use cpose_nerf::camera::PoseGradient;
 use cpose_nerf::field3d::{
     HashGridConfig, HashGridField, Interpolation, RadianceField, SceneBounds,
 };
+use cpose_nerf::mesh::{Grid, Mesh};
 use cpose_nerf::nerf::render::{CameraRay, RenderSettings, Renderer};
-use cpose_nerf::volume::{Composited, Sampling};
+use cpose_nerf::volume::{Composited, LastInterval, Sampling};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
@@ -30,6 +31,10 @@ pub const MAPPING_COLOR_WEIGHT: f32 = 0.2;
 
 /// Weight of the colour term in tracking (NICE-SLAM: 0.5).
 pub const TRACKING_COLOR_WEIGHT: f32 = 0.5;
+
+/// The map's density scale ([`HashGridConfig::density_scale`]), per metre: with open rays the
+/// depth loss has to build opaque surfaces a few centimetres thick, hundreds per metre.
+const DENSITY_SCALE: f64 = 30.0;
 
 /// Most samples per ray.
 const MAX_SAMPLES: usize = 256;
@@ -67,6 +72,7 @@ impl Default for MapConfig {
                 hidden_layers: 1,
                 c2f: None,
                 init_scale: 1e-4,
+                density_scale: DENSITY_SCALE,
                 interpolation: Interpolation::Smoothstep,
                 seed: 0,
             },
@@ -164,6 +170,7 @@ impl NeuralMap {
         let n = field.num_params();
         Ok(Self {
             settings: RenderSettings {
+                last_interval: LastInterval::Open,
                 samples: config.samples(),
                 sampling: Sampling::Metric {
                     near: config.near,
@@ -186,6 +193,12 @@ impl NeuralMap {
             scratch: Vec::new(),
             outputs: Vec::new(),
         })
+    }
+
+    /// The surface `σ = level` on `grid`, keeping the triangles whose centroid satisfies `keep`
+    /// ([`cpose_nerf::mesh::extract`]).
+    pub fn mesh(&mut self, grid: &Grid, level: f32, keep: impl Fn([f64; 3]) -> bool) -> Mesh {
+        cpose_nerf::mesh::extract(&mut self.field, grid, level, keep)
     }
 
     /// Writes the field's parameters and its optimiser's state.
@@ -312,7 +325,7 @@ impl NeuralMap {
         let out = &self.outputs;
         self.variances.resize(n, 0.0);
         self.renderer
-            .depth_variances(self.settings.samples, &mut self.variances);
+            .depth_variances(&self.settings, &mut self.variances);
         // Normalised depth residuals and NICE-SLAM's robust mask (10 × the median).
         self.residuals.clear();
         for ((p, o), var) in pixels.iter().zip(out).zip(&self.variances) {

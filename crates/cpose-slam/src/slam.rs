@@ -12,9 +12,10 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{Reader, Writer};
-use crate::data::RgbdFrame;
+use crate::data::{DepthImage, RgbdFrame};
 use crate::map::{NeuralMap, PixelSample};
 use crate::track::PoseModel;
+use cpose_nerf::mesh::{Grid, Mesh};
 
 /// Tracking settings; `[tracking]` in a config.
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
@@ -140,6 +141,36 @@ impl Slam {
             pixels: Vec::new(),
             pose_grads: Vec::new(),
         })
+    }
+
+    /// A mesh of the map on `grid` at density `level`, culled to the space the keyframes saw:
+    /// a triangle stays if some keyframe sees its centre no more than `margin` metres behind the
+    /// measured depth (NICE-SLAM culls its meshes to the cameras' frusta likewise).
+    pub fn mesh(&mut self, grid: &Grid, level: f32, margin: f64) -> Mesh {
+        let views: Vec<(Isometry3<f64>, &DepthImage)> = self
+            .keyframes
+            .iter()
+            .filter_map(|(i, kf)| Some((self.estimates.get(*i)?.inverse(), &kf.depth)))
+            .collect();
+        let camera = &self.camera;
+        let observed = |p: [f64; 3]| {
+            views.iter().any(|(camera_from_world, depth)| {
+                let q = camera_from_world * nalgebra::Point3::from(p);
+                let Some([u, v]) = camera.project(&q.coords) else {
+                    return false;
+                };
+                if u < 0.0 || v < 0.0 {
+                    return false;
+                }
+                let (x, y) = (u as usize, v as usize);
+                if x >= depth.width() || y >= depth.height() {
+                    return false;
+                }
+                let d = depth.at(x, y) as f64;
+                d > 0.0 && q.z <= d + margin
+            })
+        };
+        self.map.mesh(grid, level, observed)
     }
 
     /// Writes the run's state after its last processed frame: estimates, keyframes, map.
@@ -349,8 +380,8 @@ mod tests {
     use std::path::Path;
 
     /// Runs `frames` frames of the synthetic room at 128×73 and returns the mean position error
-    /// of the tracked frames and the mean distance the camera moved from frame 0.
-    fn run(model: &mut dyn PoseModel, frames: usize) -> (f64, f64) {
+    /// of the tracked frames, the mean distance the camera moved from frame 0, and the run.
+    fn run(model: &mut dyn PoseModel, frames: usize) -> (f64, f64, Slam) {
         let config = RoomConfig {
             width: 128,
             frames,
@@ -399,17 +430,39 @@ mod tests {
             .map(|i| (poses[0].translation.vector - poses[i].translation.vector).norm())
             .sum::<f64>()
             / n as f64;
-        (error, motion)
+        (error, motion, slam)
     }
 
     #[test]
     fn free_pose_and_posenet_track_the_walk_through_the_room() {
-        let (error, motion) = run(&mut FreePose::new(1e-3, 1.0), 16);
+        let (error, motion, mut slam) = run(&mut FreePose::new(1e-3, 1.0), 16);
         // At 128 px across, a quarter of the motion is left unexplained (4.4 cm of 12.4).
         assert!(
             error < motion / 2.0,
             "free pose: {error} m vs motion {motion} m"
         );
+        // The map holds real surfaces: its mesh lies on the room's, seen from the first camera.
+        let grid = Grid::covering([-3.0, -2.5, 0.0], [3.0, 2.5, 2.8], 0.05).unwrap();
+        let mesh = slam.mesh(&grid, 30.0, 0.05);
+        assert!(
+            mesh.triangles.len() > 1000,
+            "{} triangles",
+            mesh.triangles.len()
+        );
+        let scene = room_scene();
+        let eye = slam.estimates[0].translation.vector;
+        let mut offsets: Vec<f64> = mesh
+            .vertices
+            .iter()
+            .filter_map(|v| {
+                let to = nalgebra::Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64) - eye;
+                let hit = scene.trace(&eye, &to.normalize())?;
+                Some((hit.t - to.norm()).abs())
+            })
+            .collect();
+        offsets.sort_by(f64::total_cmp);
+        let median = offsets[offsets.len() / 2];
+        assert!(median < 0.02, "median mesh offset {median} m");
         let range = TimeRange::new(0.0, 15.0 / 30.0).unwrap();
         let mut posenet = PoseNetTracker::new(
             &PoseNetTrackConfig::default(),
@@ -418,7 +471,7 @@ mod tests {
             0,
         )
         .unwrap();
-        let (error, motion) = run(&mut posenet, 16);
+        let (error, motion, _) = run(&mut posenet, 16);
         assert!(
             error < motion / 2.0,
             "posenet: {error} m vs motion {motion} m"

@@ -15,6 +15,7 @@ use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, write
 use cpose_core::registry::{Task, TaskInput};
 use cpose_nerf::field3d::SceneBounds;
 use cpose_nerf::image::Image;
+use cpose_nerf::mesh::Grid;
 use cpose_nerf::nerf::eval::trajectory_plot;
 use nalgebra::Isometry3;
 use rand::SeedableRng;
@@ -57,7 +58,32 @@ struct Experiment {
     posenet: PoseNetTrackConfig,
     #[serde(default)]
     intrinsic: IntrinsicConfig,
+    #[serde(default)]
+    mesh: MeshConfig,
     slam: SlamConfig,
+}
+
+/// The map's surface, written as `mesh_<method>.ply` after each method.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct MeshConfig {
+    /// Grid spacing of the marching tetrahedra, metres (0: no mesh).
+    voxel: f64,
+    /// The density of the surface, 1/m (the map's density scale: on the synthetic room the
+    /// iso-surface lies within millimetres of the true one; lower levels sit in front of it).
+    level: f32,
+    /// Triangles more than this far behind every keyframe's measured depth are culled, metres.
+    margin: f64,
+}
+
+impl Default for MeshConfig {
+    fn default() -> Self {
+        Self {
+            voxel: 0.04,
+            level: 30.0,
+            margin: 0.05,
+        }
+    }
 }
 
 /// Where the frames come from.
@@ -111,6 +137,18 @@ struct BoundsConfig {
 }
 
 impl BoundsConfig {
+    /// The box to mesh: the configured box, or the cube around the ball.
+    fn mesh_box(&self) -> anyhow::Result<([f64; 3], [f64; 3])> {
+        if let Some(b) = self.aabb {
+            return Ok((b.map(|a| a[0]), b.map(|a| a[1])));
+        }
+        let s = self.scene_bounds()?;
+        Ok((
+            s.centre.map(|c| c - s.radius),
+            s.centre.map(|c| c + s.radius),
+        ))
+    }
+
     fn scene_bounds(&self) -> anyhow::Result<SceneBounds> {
         let (centre, radius) = match (self.aabb, self.centre, self.radius) {
             (Some(b), None, None) => {
@@ -310,6 +348,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     ));
     let start = truth[0].unwrap_or_else(Isometry3::identity);
     let bounds = exp.bounds.scene_bounds()?;
+    let mesh_grid = if exp.mesh.voxel > 0.0 {
+        let (min, max) = exp.bounds.mesh_box()?;
+        Some(Grid::covering(min, max, exp.mesh.voxel).context("[mesh]")?)
+    } else {
+        None
+    };
     let range = TimeRange::new(times[0], times[n - 1])
         .context("frame times must increase from the first to the last frame")?;
     // On resume, methods already in metrics.json are done.
@@ -449,6 +493,18 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             }
         };
         save_view(&mut slam, &seq, n - 1, input, method.key())?;
+        if let Some(grid) = &mesh_grid {
+            let mesh = slam.mesh(grid, exp.mesh.level, exp.mesh.margin);
+            let path = input.run_dir.file(format!("mesh_{}.ply", method.key()));
+            mesh.write_ply(&path)?;
+            input.run_dir.log(format_args!(
+                "{}: mesh of {} triangles ({:.1} m²) in {}",
+                method.key(),
+                mesh.triangles.len(),
+                mesh.area(),
+                path.display()
+            ));
+        }
         let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, _)| 100.0 * f(r));
         let result = MethodResult {
             ate_rmse_cm: cm(|r| r.rmse_m),

@@ -162,6 +162,10 @@ pub struct PoseNetTrackConfig {
     pub refit_steps: usize,
     /// Earlier frames per re-fitting step (plus the newest).
     pub refit_batch: usize,
+    /// A new tracking optimiser for every frame, as the authors' PoseNet tracking (and NICE-SLAM's
+    /// free pose); `false` keeps the Adam moments from frame to frame. Re-fitting has its own
+    /// optimiser, kept for the whole run.
+    pub fresh_optimizer: bool,
     /// Rotation spread of the random reference, radians.
     pub random_rotation: f64,
     /// Translation spread of the random reference, metres.
@@ -182,6 +186,7 @@ impl Default for PoseNetTrackConfig {
             lr_rotation: 5e-4,
             refit_steps: 5,
             refit_batch: 32,
+            fresh_optimizer: true,
             random_rotation: 0.05,
             random_translation: 0.05,
         }
@@ -193,7 +198,10 @@ pub struct PoseNetTracker {
     net: Box<dyn PoseField<f32>>,
     config: PoseNetTrackConfig,
     reference: Reference,
+    /// Tracking's optimiser ([`PoseNetTrackConfig::fresh_optimizer`]).
     adam: Adam<f32>,
+    /// Re-fitting's optimiser.
+    refit_adam: Adam<f32>,
     grad: Vec<f32>,
     batch: PoseBatch,
     cotangent: PoseBatch,
@@ -226,6 +234,7 @@ impl PoseNetTracker {
             config: config.clone(),
             reference,
             adam: Adam::new(n),
+            refit_adam: Adam::new(n),
             grad: vec![0.0; n],
             batch: PoseBatch::default(),
             cotangent: PoseBatch::default(),
@@ -287,7 +296,7 @@ impl PoseNetTracker {
             self.grad.fill(0.0);
             self.net.backward(&times, &self.cotangent, &mut self.grad)?;
             let (lr_r, lr_t) = (self.config.lr_rotation, self.config.lr_translation);
-            self.adam
+            self.refit_adam
                 .step_pose_field(self.net.as_mut(), &self.grad, |kind| match kind {
                     ParamKind::Rotation => lr_r,
                     _ => lr_t,
@@ -304,7 +313,7 @@ impl PoseModel for PoseNetTracker {
         time: f64,
         history: &[Isometry3<f64>],
     ) -> anyhow::Result<Isometry3<f64>> {
-        self.reseed(index);
+        self.start_frame(index);
         self.current_ref = match self.reference {
             Reference::Previous => history[index - 1],
             Reference::World => history[0],
@@ -349,19 +358,23 @@ impl PoseModel for PoseNetTracker {
 
     fn save(&self, w: &mut Writer) {
         w.f32s(&self.state());
-        let (m, v, t) = self.adam.state();
-        w.f32s(m);
-        w.f32s(v);
-        w.u64(t);
+        for adam in [&self.adam, &self.refit_adam] {
+            let (m, v, t) = adam.state();
+            w.f32s(m);
+            w.f32s(v);
+            w.u64(t);
+        }
         w.f64s(&self.memory.iter().map(|m| m.0).collect::<Vec<_>>());
         w.poses(&self.memory.iter().map(|m| m.1).collect::<Vec<_>>());
     }
 
     fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
         self.restore(&r.f32s()?)?;
-        let (m, v, t) = (r.f32s()?, r.f32s()?, r.u64()?);
-        if !self.adam.set_state(&m, &v, t) {
-            anyhow::bail!("the checkpoint's PoseNet optimiser does not match this network");
+        for adam in [&mut self.adam, &mut self.refit_adam] {
+            let (m, v, t) = (r.f32s()?, r.f32s()?, r.u64()?);
+            if !adam.set_state(&m, &v, t) {
+                anyhow::bail!("the checkpoint's PoseNet optimiser does not match this network");
+            }
         }
         let (times, poses) = (r.f64s()?, r.poses()?);
         if times.len() != poses.len() {
@@ -373,11 +386,15 @@ impl PoseModel for PoseNetTracker {
 }
 
 impl PoseNetTracker {
-    /// The generator of frame `index` (random references, re-fitting batches).
-    fn reseed(&mut self, index: usize) {
+    /// Prepares frame `index`: its own generator (random references, re-fitting batches; resumable
+    /// runs) and, if configured, a new tracking optimiser.
+    fn start_frame(&mut self, index: usize) {
         self.rng = ChaCha8Rng::seed_from_u64(
             (self.seed ^ 0x5EED_7AC4).wrapping_add((index as u64).wrapping_mul(0x9E37_79B9)),
         );
+        if self.config.fresh_optimizer {
+            self.adam = Adam::new(self.grad.len());
+        }
     }
 
     /// The network's parameters, flat.
@@ -581,8 +598,8 @@ impl PoseModel for IntrinsicTracker {
         // Both networks only evaluate at `time`; the reference is applied here.
         self.origin.time = time;
         self.motion.time = time;
-        self.origin.reseed(index);
-        self.motion.reseed(index);
+        self.origin.start_frame(index);
+        self.motion.start_frame(index);
         self.origin.evaluate()?;
         self.motion.evaluate()?;
         Ok(self.pose())

@@ -65,6 +65,10 @@ pub struct HashGridConfig {
     pub interpolation: Interpolation,
     /// Seed of the initialisation (ChaCha8: the MLP, then the grid); default 0.
     pub seed: u64,
+    /// `k` in `σ = k · softplus(z₀ + GRID_DENSITY_BIAS)`: the density per unit length an MLP
+    /// output of order one means. Default 1 (scenes of a few units); metric indoor maps need
+    /// surfaces of hundreds per metre.
+    pub density_scale: f64,
 }
 
 impl Default for HashGridConfig {
@@ -79,6 +83,7 @@ impl Default for HashGridConfig {
             hidden_layers: 2,
             c2f: Some([0.1, 0.5]),
             init_scale: 1e-4,
+            density_scale: 1.0,
             interpolation: Interpolation::Linear,
             seed: 0,
         }
@@ -136,6 +141,9 @@ impl HashGridConfig {
         }
         if !(self.init_scale.is_finite() && self.init_scale >= 0.0) {
             return invalid("init_scale", "a finite value ≥ 0", self.init_scale);
+        }
+        if !(self.density_scale.is_finite() && self.density_scale > 0.0) {
+            return invalid("density_scale", "a finite value > 0", self.density_scale);
         }
         check_c2f(self.c2f)?;
         scene.validate()?;
@@ -219,7 +227,7 @@ impl HashGridConfig {
 /// interpolation `f_l(p) = Σ_{c ∈ {0,1}³} Π_d (c_d ? t_d : 1 − t_d) · v_{i₀ + c}`. The network
 /// input is `[w_0 f_0(p), …, w_{L−1} f_{L−1}(p)]` (`L·F` values; `w_l` are BARF's
 /// coarse-to-fine weights with the levels as bands), then `hidden_layers` ReLU layers of
-/// `width` units and a linear layer to 4 outputs `z`: `σ = softplus(z₀ + GRID_DENSITY_BIAS)`
+/// `width` units and a linear layer to 4 outputs `z`: `σ = k softplus(z₀ + GRID_DENSITY_BIAS)`
 /// ([`GRID_DENSITY_BIAS`]), `rgb = sigmoid(z₁..₃)`.
 ///
 /// Reverse pass to the point: `∂f_l/∂p_d = R_l/(2E) · Σ_c ±Π_{e≠d}(…) v_c` (the sign that of
@@ -553,6 +561,7 @@ impl<S: Real> HashGridField<S> {
             }
         }
         let bias = S::from_f64(GRID_DENSITY_BIAS);
+        let scale = S::from_f64(self.config.density_scale);
         let chunk_count = b.div_ceil(MLP_CHUNK);
         if part.mlp.len() < chunk_count {
             part.mlp.resize_with(chunk_count, MlpWorkspace::default);
@@ -568,6 +577,14 @@ impl<S: Real> HashGridField<S> {
                 &mut part.sigma[r.clone()],
                 &mut part.slope[r.clone()],
             );
+            if scale != S::ONE {
+                for v in part.sigma[r.clone()]
+                    .iter_mut()
+                    .chain(&mut part.slope[r.clone()])
+                {
+                    *v *= scale;
+                }
+            }
             colour_forward(&z[len..4 * len], &mut part.rgb[3 * r.start..3 * r.end]);
         }
     }
@@ -867,6 +884,7 @@ mod tests {
             hidden_layers: 2,
             c2f: Some([0.05, 0.45]),
             init_scale: 1e-4,
+            density_scale: 1.0,
             interpolation: Interpolation::Linear,
             seed: 3,
         }
@@ -923,17 +941,19 @@ mod tests {
     #[test]
     fn gradients_match_central_differences() {
         use Interpolation::{Linear, Smoothstep};
-        for (unbounded, progress, c2f, interpolation) in [
-            (false, 0.3, Some([0.05, 0.45]), Linear),
-            (true, 0.3, Some([0.05, 0.45]), Linear),
-            (true, 0.0, None, Linear),
-            (false, 0.3, Some([0.05, 0.45]), Smoothstep),
-            (true, 0.0, None, Smoothstep),
+        for (unbounded, progress, c2f, interpolation, density_scale) in [
+            (false, 0.3, Some([0.05, 0.45]), Linear, 1.0),
+            (true, 0.3, Some([0.05, 0.45]), Linear, 1.0),
+            (true, 0.0, None, Linear, 1.0),
+            (false, 0.3, Some([0.05, 0.45]), Smoothstep, 1.0),
+            (true, 0.0, None, Smoothstep, 1.0),
+            (false, 0.0, None, Smoothstep, 30.0),
         ] {
             let scene = scene(unbounded);
             let mut field = HashGridConfig {
                 c2f,
                 interpolation,
+                density_scale,
                 ..small()
             }
             .init::<f64>(scene)
@@ -1383,6 +1403,13 @@ mod tests {
                     ..small()
                 },
                 "init_scale",
+            ),
+            (
+                HashGridConfig {
+                    density_scale: 0.0,
+                    ..small()
+                },
+                "density_scale",
             ),
             (
                 HashGridConfig {

@@ -58,6 +58,7 @@ use crate::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use crate::image::Image;
 use crate::metrics::ssim;
 use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
+use crate::volume::LastInterval;
 use crate::volume::Sampling;
 use eval::Refinement;
 use poses::{FramePoses, PoseSchedules};
@@ -328,6 +329,7 @@ fn resolve_settings(
         bail!("[render] samples: expected at least 1");
     }
     Ok(RenderSettings {
+        last_interval: LastInterval::Closed,
         samples: render.samples,
         sampling,
         background: render.background.or(default_bg),

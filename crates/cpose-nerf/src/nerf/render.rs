@@ -15,7 +15,9 @@ use rayon::prelude::*;
 use crate::camera::{PinholeCamera, PoseGradient};
 use crate::field3d::RadianceField;
 use crate::image::Image;
-use crate::volume::{Composited, Sampling, composite_batch, composite_batch_backward};
+use crate::volume::{
+    Composited, LastInterval, Sampling, composite_batch, composite_batch_backward, delta,
+};
 use cpose_core::Real;
 
 /// Rays per parallel work item.
@@ -33,6 +35,8 @@ pub struct RenderSettings {
     /// The scene is empty outside this sphere: metric samples are spread over the ray's chord
     /// through it instead of all of `[near, far]`, and points outside have `σ = 0` ([`Clip`]).
     pub clip: Option<Clip>,
+    /// The last sample's interval: BARF's closed ray, or open (NICE-SLAM).
+    pub last_interval: LastInterval,
 }
 
 impl RenderSettings {
@@ -234,11 +238,11 @@ impl<S: Real> Renderer<S> {
         self.shade(field, settings, n)
     }
 
-    /// The depth variance `Var = Σ_j w_j (s_j − D)²` of each ray of the last forward pass
-    /// (`samples` per ray, `D` its composited depth) into `out` (NICE-SLAM's tracking weight;
-    /// a constant for the gradient, as there).
-    pub fn depth_variances(&self, samples: usize, out: &mut [S]) {
-        let k = samples;
+    /// The depth variance `Var = Σ_j w_j (s_j − D)²` of each ray of the last forward pass with
+    /// `settings` (`D` its composited depth) into `out` (NICE-SLAM's tracking weight; a constant
+    /// for the gradient, as there).
+    pub fn depth_variances(&self, settings: &RenderSettings, out: &mut [S]) {
+        let k = settings.samples;
         for (r, v) in out.iter_mut().enumerate() {
             let (sigma, depths) = (
                 &self.sigma[r * k..(r + 1) * k],
@@ -248,12 +252,8 @@ impl<S: Real> Renderer<S> {
             let mut trans = S::ONE;
             let mut acc = S::ZERO;
             for j in 0..k {
-                let delta = if j + 1 < k {
-                    (depths[j + 1] - depths[j]) * self.norms[r]
-                } else {
-                    S::from_f64(crate::volume::LAST_DELTA) * self.norms[r]
-                };
-                let e = Real::exp(-sigma[j] * delta);
+                let e =
+                    Real::exp(-sigma[j] * delta(depths, j, self.norms[r], settings.last_interval));
                 let w = trans * (S::ONE - e);
                 trans *= e;
                 let dev = depths[j] - depth;
@@ -299,6 +299,7 @@ impl<S: Real> Renderer<S> {
                 settings
                     .background
                     .map(|b| b.map(|v| S::from_f64(v.into()))),
+                settings.last_interval,
                 out,
             );
         });
@@ -344,6 +345,7 @@ impl<S: Real> Renderer<S> {
                     settings
                         .background
                         .map(|b| b.map(|v| S::from_f64(v.into()))),
+                    settings.last_interval,
                     &grad[r],
                     gs,
                     gc,
@@ -502,6 +504,7 @@ mod tests {
     fn clipped_rays_sample_inside_the_sphere() {
         let mut field = field();
         let settings = RenderSettings {
+            last_interval: LastInterval::Closed,
             samples: 16,
             sampling: Sampling::Metric {
                 near: 2.0,
@@ -541,6 +544,7 @@ mod tests {
     ) -> (f64, Vector6<f64>) {
         let camera = PinholeCamera::from_fov_x(40, 30, 0.8);
         let settings = RenderSettings {
+            last_interval: LastInterval::Closed,
             samples: 24,
             sampling: Sampling::Metric {
                 near: 2.0,

@@ -263,6 +263,7 @@ pub(super) mod tests {
     use crate::field3d::{HashGridConfig, SceneBounds};
     use crate::nerf::poses::PoseSchedules;
     use crate::scene::{MonocularOrbit, SyntheticScene};
+    use crate::volume::LastInterval;
     use crate::volume::Sampling;
 
     /// A small run on the synthetic scene: 4 views of 16×16 along the orbit, a small hash grid,
@@ -325,6 +326,7 @@ pub(super) mod tests {
         /// A trainer of `iterations` steps of 64 rays × 16 samples, seed 0.
         pub fn trainer(&mut self, iterations: u64) -> Trainer<'_> {
             let settings = RenderSettings {
+                last_interval: LastInterval::Closed,
                 samples: 16,
                 sampling: Sampling::Metric {
                     near: 2.0,
