@@ -216,6 +216,7 @@ fn every_config_runs_as_a_smoke_test() {
                 "tracking.edge=2".to_string(),
                 "tracking.pixels=32".to_string(),
                 "mapping.pixels=64".to_string(),
+                "mesh.voxel=0.25".to_string(),
                 format!("data.path={}", data_dir.display()),
             ] {
                 args.extend(["--set".into(), set]);
@@ -290,6 +291,10 @@ fn every_config_runs_as_a_smoke_test() {
             "{}: empty metrics",
             config.display()
         );
+        if text.contains("task = \"slam\"") {
+            let mesh = std::fs::read(out_dir.join("mesh_baseline.ply")).unwrap_or_default();
+            assert!(mesh.starts_with(b"ply\n"), "{}: no mesh", config.display());
+        }
     }
 }
 

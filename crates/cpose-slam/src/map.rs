@@ -145,6 +145,8 @@ pub struct NeuralMap {
     residuals: Vec<f32>,
     scratch: Vec<f32>,
     outputs: Vec<Composited<f32>>,
+    /// Median `|D̂ − D|` of the last [`NeuralMap::tracking_loss`], metres.
+    depth_error: f64,
 }
 
 impl NeuralMap {
@@ -192,6 +194,7 @@ impl NeuralMap {
             residuals: Vec::new(),
             scratch: Vec::new(),
             outputs: Vec::new(),
+            depth_error: 0.0,
         })
     }
 
@@ -340,6 +343,18 @@ impl NeuralMap {
         } else {
             *self.scratch.select_nth_unstable_by(mid, f32::total_cmp).1
         };
+        self.scratch.clear();
+        self.scratch.extend(
+            pixels
+                .iter()
+                .zip(out)
+                .map(|(p, o)| (o.depth - p.depth).abs()),
+        );
+        self.depth_error = if self.scratch.is_empty() {
+            0.0
+        } else {
+            *self.scratch.select_nth_unstable_by(mid, f32::total_cmp).1 as f64
+        };
         let mut loss = 0.0f64;
         self.cotangents.clear();
         for (i, (p, o)) in pixels.iter().zip(out).enumerate() {
@@ -359,6 +374,11 @@ impl NeuralMap {
         }
         self.backward(Some(pose_grads));
         loss
+    }
+
+    /// The median depth error `|D̂ − D|` of the last [`NeuralMap::tracking_loss`], metres.
+    pub fn depth_error(&self) -> f64 {
+        self.depth_error
     }
 
     /// The reverse pass of the last render from `self.cotangents`: the field's gradient into

@@ -33,6 +33,9 @@ pub struct TrackingConfig {
     pub rotation_lr_factor: f64,
     /// A frame whose pose moves farther than this from its start (metres) is reported lost.
     pub lost_translation: f64,
+    /// A frame whose median depth error `|D̂ − D|` at the chosen pose exceeds this (metres) is
+    /// reported lost: the map does not explain it (a track that drifts off slowly).
+    pub lost_depth_error: f64,
 }
 
 impl Default for TrackingConfig {
@@ -44,6 +47,7 @@ impl Default for TrackingConfig {
             lr: 1e-3,
             rotation_lr_factor: 1.0,
             lost_translation: 0.5,
+            lost_depth_error: 0.2,
         }
     }
 }
@@ -87,7 +91,10 @@ pub struct TrackReport {
     pub loss: f64,
     /// Distance of the chosen pose from the starting prediction, metres.
     pub moved: f64,
-    /// Whether the track counts as lost ([`TrackingConfig::lost_translation`]).
+    /// Median depth error at the chosen pose, metres.
+    pub depth_error: f64,
+    /// Whether the track counts as lost ([`TrackingConfig::lost_translation`],
+    /// [`TrackingConfig::lost_depth_error`]).
     pub lost: bool,
 }
 
@@ -248,7 +255,7 @@ impl Slam {
     ) -> anyhow::Result<TrackReport> {
         let start = model.begin(index, frame.time, &self.estimates)?;
         let mut rng = self.rng(index, 1);
-        let mut best = (f64::INFINITY, start);
+        let mut best = (f64::INFINITY, start, 0.0);
         self.pose_grads.resize(1, PoseGradient::new());
         for _ in 0..self.tracking.iterations {
             let pose = model.pose();
@@ -274,7 +281,7 @@ impl Slam {
                 anyhow::bail!("tracking loss is {loss} at frame {index}");
             }
             if loss < best.0 {
-                best = (loss, pose);
+                best = (loss, pose, self.map.depth_error());
             }
             let (gq, gt) = self.pose_grads[0].quaternion_translation(&pose.rotation);
             model.step(&gq, &gt)?;
@@ -283,10 +290,13 @@ impl Slam {
         model.finish(index, frame.time, &pose)?;
         self.estimates.push(pose);
         let moved = (pose.translation.vector - start.translation.vector).norm();
+        let depth_error = best.2;
         Ok(TrackReport {
             loss: best.0 / self.tracking.pixels as f64,
             moved,
-            lost: moved > self.tracking.lost_translation,
+            depth_error,
+            lost: moved > self.tracking.lost_translation
+                || depth_error > self.tracking.lost_depth_error,
         })
     }
 
@@ -377,11 +387,11 @@ mod tests {
     use crate::track::{FreePose, PoseNetTrackConfig, PoseNetTracker, Reference};
     use cpose_core::TimeRange;
     use cpose_nerf::field3d::SceneBounds;
+    use nalgebra::{Quaternion, Vector3};
     use std::path::Path;
 
-    /// Runs `frames` frames of the synthetic room at 128×73 and returns the mean position error
-    /// of the tracked frames, the mean distance the camera moved from frame 0, and the run.
-    fn run(model: &mut dyn PoseModel, frames: usize) -> (f64, f64, Slam) {
+    /// The walk through the room at 128×73 for `frames` frames, its camera and true poses.
+    fn walk(frames: usize) -> (RoomConfig, PinholeCamera, Vec<Isometry3<f64>>) {
         let config = RoomConfig {
             width: 128,
             frames,
@@ -392,6 +402,79 @@ mod tests {
             .camera_for(intrinsics.width, intrinsics.height, Path::new("test"))
             .unwrap();
         let poses = RoomMotion::from_config(&config).unwrap().camera_poses();
+        (config, camera, poses)
+    }
+
+    /// A pose model that stays where it is put (tracking cannot move it).
+    struct Fixed(Isometry3<f64>);
+
+    impl PoseModel for Fixed {
+        fn begin(
+            &mut self,
+            _: usize,
+            _: f64,
+            _: &[Isometry3<f64>],
+        ) -> anyhow::Result<Isometry3<f64>> {
+            Ok(self.0)
+        }
+        fn pose(&self) -> Isometry3<f64> {
+            self.0
+        }
+        fn step(&mut self, _: &Quaternion<f64>, _: &Vector3<f64>) -> anyhow::Result<()> {
+            Ok(())
+        }
+        fn finish(&mut self, _: usize, _: f64, _: &Isometry3<f64>) -> anyhow::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_frame_the_map_does_not_explain_is_reported_lost() {
+        let (config, camera, poses) = walk(3);
+        let scene = room_scene();
+        let bounds = SceneBounds {
+            centre: [0.0, 0.0, 1.4],
+            radius: 3.3,
+            unbounded: false,
+        };
+        let map = NeuralMap::new(&crate::map::MapConfig::default(), bounds).unwrap();
+        let mapping = MappingConfig {
+            first_iterations: 200,
+            pixels: 512,
+            ..MappingConfig::default()
+        };
+        let mut slam = Slam::new(map, camera, &TrackingConfig::default(), &mapping, 0).unwrap();
+        let frame = |i: usize| {
+            let (color, depth) = render_frame(&scene, &camera, &poses[i], 1, true, 0, i);
+            RgbdFrame {
+                index: i,
+                time: i as f64 / config.frame_rate,
+                color,
+                depth,
+            }
+        };
+        slam.process(frame(0), poses[0], &mut Fixed(poses[0]))
+            .unwrap();
+        // At the true pose the map explains the frame; 40 cm to the side and turned by 60°, a
+        // pose that moves nothing while tracking, it does not.
+        let good = slam
+            .process(frame(1), poses[0], &mut Fixed(poses[1]))
+            .unwrap()
+            .unwrap();
+        assert!(!good.lost && good.depth_error < 0.05, "{good:?}");
+        let off =
+            poses[2] * Isometry3::new(Vector3::new(0.4, 0.0, 0.0), Vector3::new(0.0, 1.05, 0.0));
+        let bad = slam
+            .process(frame(2), poses[0], &mut Fixed(off))
+            .unwrap()
+            .unwrap();
+        assert!(bad.lost && bad.moved == 0.0, "{bad:?}");
+    }
+
+    /// Runs `frames` frames of the synthetic room at 128×73 and returns the mean position error
+    /// of the tracked frames, the mean distance the camera moved from frame 0, and the run.
+    fn run(model: &mut dyn PoseModel, frames: usize) -> (f64, f64, Slam) {
+        let (config, camera, poses) = walk(frames);
         let scene = room_scene();
         let bounds = SceneBounds {
             centre: [0.0, 0.0, 1.4],

@@ -435,9 +435,11 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             {
                 if lost.is_empty() {
                     input.run_dir.log(format_args!(
-                        "{}: track lost at frame {i} (moved {:.3} m while tracking, loss {:.3})",
+                        "{}: track lost at frame {i} (moved {:.3} m while tracking, median depth \
+                         error {:.3} m, loss {:.3})",
                         method.key(),
                         r.moved,
+                        r.depth_error,
                         r.loss
                     ));
                 }
