@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod data;
 pub mod map;
 pub mod slam;
+pub mod surface;
 pub mod synth;
 mod synth_task;
 mod task;

@@ -405,6 +405,37 @@ mod tests {
         (config, camera, poses)
     }
 
+    /// A fresh run over the room's box.
+    fn room_slam(
+        camera: PinholeCamera,
+        tracking: &TrackingConfig,
+        mapping: &MappingConfig,
+    ) -> Slam {
+        let bounds = SceneBounds {
+            centre: [0.0, 0.0, 1.4],
+            radius: 3.3,
+            unbounded: false,
+        };
+        let map = NeuralMap::new(&crate::map::MapConfig::default(), bounds).unwrap();
+        Slam::new(map, camera, tracking, mapping, 0).unwrap()
+    }
+
+    /// Frame `i` of the room seen from `pose`, with depth noise.
+    fn room_frame(
+        config: &RoomConfig,
+        camera: &PinholeCamera,
+        pose: &Isometry3<f64>,
+        i: usize,
+    ) -> RgbdFrame {
+        let (color, depth) = render_frame(&room_scene(), camera, pose, 1, true, 0, i);
+        RgbdFrame {
+            index: i,
+            time: i as f64 / config.frame_rate,
+            color,
+            depth,
+        }
+    }
+
     /// A pose model that stays where it is put (tracking cannot move it).
     struct Fixed(Isometry3<f64>);
 
@@ -431,28 +462,13 @@ mod tests {
     #[test]
     fn a_frame_the_map_does_not_explain_is_reported_lost() {
         let (config, camera, poses) = walk(3);
-        let scene = room_scene();
-        let bounds = SceneBounds {
-            centre: [0.0, 0.0, 1.4],
-            radius: 3.3,
-            unbounded: false,
-        };
-        let map = NeuralMap::new(&crate::map::MapConfig::default(), bounds).unwrap();
         let mapping = MappingConfig {
             first_iterations: 200,
             pixels: 512,
             ..MappingConfig::default()
         };
-        let mut slam = Slam::new(map, camera, &TrackingConfig::default(), &mapping, 0).unwrap();
-        let frame = |i: usize| {
-            let (color, depth) = render_frame(&scene, &camera, &poses[i], 1, true, 0, i);
-            RgbdFrame {
-                index: i,
-                time: i as f64 / config.frame_rate,
-                color,
-                depth,
-            }
-        };
+        let mut slam = room_slam(camera, &TrackingConfig::default(), &mapping);
+        let frame = |i: usize| room_frame(&config, &camera, &poses[i], i);
         slam.process(frame(0), poses[0], &mut Fixed(poses[0]))
             .unwrap();
         // At the true pose the map explains the frame; 40 cm to the side and turned by 60°, a
@@ -475,13 +491,6 @@ mod tests {
     /// of the tracked frames, the mean distance the camera moved from frame 0, and the run.
     fn run(model: &mut dyn PoseModel, frames: usize) -> (f64, f64, Slam) {
         let (config, camera, poses) = walk(frames);
-        let scene = room_scene();
-        let bounds = SceneBounds {
-            centre: [0.0, 0.0, 1.4],
-            radius: 3.3,
-            unbounded: false,
-        };
-        let map = NeuralMap::new(&crate::map::MapConfig::default(), bounds).unwrap();
         let tracking = TrackingConfig {
             edge: 2,
             pixels: 200,
@@ -493,16 +502,10 @@ mod tests {
             pixels: 512,
             ..MappingConfig::default()
         };
-        let mut slam = Slam::new(map, camera, &tracking, &mapping, 0).unwrap();
+        let mut slam = room_slam(camera, &tracking, &mapping);
         for (i, pose) in poses.iter().enumerate() {
-            let (color, depth) = render_frame(&scene, &camera, pose, 1, true, 0, i);
-            let frame = RgbdFrame {
-                index: i,
-                time: i as f64 / config.frame_rate,
-                color,
-                depth,
-            };
-            slam.process(frame, poses[0], model).unwrap();
+            slam.process(room_frame(&config, &camera, pose, i), poses[0], model)
+                .unwrap();
         }
         let n = frames - 1;
         let error = (1..frames)

@@ -26,6 +26,7 @@ use crate::checkpoint::{Reader, Writer};
 use crate::data::{RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
 use crate::map::{MapConfig, NeuralMap, PixelSample};
 use crate::slam::{MappingConfig, Slam, TrackingConfig};
+use crate::surface::{COMPLETION_RADIUS, score_mesh};
 use crate::synth::{RoomConfig, generate_room};
 use crate::track::{
     FreePose, IntrinsicConfig, IntrinsicTracker, PoseModel, PoseNetTrackConfig, PoseNetTracker,
@@ -227,6 +228,9 @@ struct MethodResult {
     first_lost: Option<usize>,
     fps: f64,
     wall_s: f64,
+    /// The mesh against the true surface seen in the depth images ([`crate::surface`]).
+    mesh_accuracy_cm: Option<f64>,
+    mesh_completion: Option<f64>,
     /// Model-specific extras (the intrinsic frame's mean effective DOF).
     #[serde(flatten)]
     extra: BTreeMap<String, f64>,
@@ -495,16 +499,24 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             }
         };
         save_view(&mut slam, &seq, n - 1, input, method.key())?;
+        let mut surface = None;
         if let Some(grid) = &mesh_grid {
             let mesh = slam.mesh(grid, exp.mesh.level, exp.mesh.margin);
             let path = input.run_dir.file(format!("mesh_{}.ply", method.key()));
             mesh.write_ply(&path)?;
+            surface = score_mesh(&mesh, &seq, truth, n)?;
             input.run_dir.log(format_args!(
-                "{}: mesh of {} triangles ({:.1} m²) in {}",
+                "{}: mesh of {} triangles ({:.1} m²) in {}{}",
                 method.key(),
                 mesh.triangles.len(),
                 mesh.area(),
-                path.display()
+                path.display(),
+                surface.map_or(String::new(), |s| format!(
+                    "; accuracy {:.2} cm, completion {:.1}% (true surface within {} cm)",
+                    100.0 * s.accuracy_m,
+                    100.0 * s.completion,
+                    100.0 * COMPLETION_RADIUS
+                ))
             ));
         }
         let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, _)| 100.0 * f(r));
@@ -518,6 +530,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             first_lost: lost.first().copied(),
             fps: n as f64 / wall_s,
             wall_s,
+            mesh_accuracy_cm: surface.map(|s| 100.0 * s.accuracy_m),
+            mesh_completion: surface.map(|s| s.completion),
             extra: model
                 .metrics()
                 .into_iter()
