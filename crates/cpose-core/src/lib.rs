@@ -17,6 +17,7 @@ pub mod geometry;
 pub mod nn;
 pub mod pose_field;
 pub mod progress;
+pub mod random;
 pub mod registry;
 pub mod run_dir;
 #[cfg(any(test, feature = "testing"))]

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 pub mod euroc;
 pub mod imu;
 pub mod losses;
+pub mod sim;
 mod trajectory;
 
 pub use cpose_slam;

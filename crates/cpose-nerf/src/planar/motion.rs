@@ -13,9 +13,10 @@
 //!
 //! Both resample until every warped crop corner lies inside the image.
 
+use cpose_core::random::standard_normal;
 use cpose_core::{PerDimSplinePoses, PoseField, TimeRange};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use rand::{RngExt, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::warp2d::{Warp, WarpKind};
@@ -107,8 +108,9 @@ impl MotionSpec {
         let knot_times: Vec<f64> = (0..k).map(|i| i as f64).collect();
         let poses: Vec<Isometry3<f64>> = (0..k)
             .map(|_| {
-                let theta = self.rotation_std_rad * gaussian(rng);
-                let t = self.translation_std * Vector3::new(gaussian(rng), gaussian(rng), 0.0);
+                let theta = self.rotation_std_rad * standard_normal(rng);
+                let t = self.translation_std
+                    * Vector3::new(standard_normal(rng), standard_normal(rng), 0.0);
                 Isometry3::from_parts(
                     Translation3::from(t),
                     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), theta),
@@ -144,7 +146,7 @@ impl MotionSpec {
                     return vec![0.0; 8];
                 }
                 let mut p: Vec<f64> = (0..8)
-                    .map(|_| self.homography_std * gaussian(rng))
+                    .map(|_| self.homography_std * standard_normal(rng))
                     .collect();
                 p[0] += offsets[(i - 1) % 4][0];
                 p[1] += offsets[(i - 1) % 4][1];
@@ -152,13 +154,6 @@ impl MotionSpec {
             })
             .collect()
     }
-}
-
-/// A standard normal sample (Box–Muller).
-fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 /// `a⁻¹ ∘ b` for SE(2) parameters `[θ, tx, ty]` (`x ↦ R(θ) x + t`).

@@ -13,6 +13,7 @@
 //! All randomness comes from a `ChaCha8Rng` seeded with the variant's `seed`.
 
 use cpose_core::geometry::se3_exp;
+use cpose_core::random::standard_normal;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -205,7 +206,7 @@ impl PoseNoise {
                 let mut rng = ChaCha8Rng::seed_from_u64(seed);
                 gt.iter()
                     .map(|pose| {
-                        let xi = Vector6::from_fn(|_, _| sigma * gaussian(&mut rng));
+                        let xi = Vector6::from_fn(|_, _| sigma * standard_normal(&mut rng));
                         se3_exp(&xi).inverse() * pose
                     })
                     .collect()
@@ -312,13 +313,6 @@ fn uniform_direction(rng: &mut ChaCha8Rng) -> Unit<Vector3<f64>> {
     let phi = std::f64::consts::TAU * rng.random::<f64>();
     let r = (1.0 - z * z).max(0.0).sqrt();
     Unit::new_unchecked(Vector3::new(r * phi.cos(), r * phi.sin(), z))
-}
-
-/// A standard normal draw (Box–Muller).
-fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 #[cfg(test)]
