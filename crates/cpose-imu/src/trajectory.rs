@@ -1,6 +1,6 @@
 //! Task `trajectory`: fit pose fields to a trajectory from poses at a subset of its timestamps,
-//! optionally supervised by the gyroscope and accelerometer through the fields' time
-//! derivatives, and report the pose error at every held-out timestamp.
+//! optionally supervised by the gyroscope (integrated over windows, or through the fields' `q̇`)
+//! and the accelerometer (through `p̈`), and report the pose error at every held-out timestamp.
 //!
 //! Sources: a built-in synthetic hand-held motion (exact IMU from its analytic derivatives), a
 //! TUM trajectory file, or a EuRoC sequence (real IMU, ground-truth biases removed). Every pose
@@ -110,6 +110,9 @@ fn default_known_every() -> usize {
 enum ImuMode {
     /// Poses only.
     None,
+    /// Plus the gyroscope integrated over windows of `loose_window_secs` (the paper's loose
+    /// coupling).
+    Loose,
     /// Plus the gyroscope through `q̇` (the paper's tight coupling).
     Tight,
     /// Plus the accelerometer through `p̈`.
@@ -137,6 +140,7 @@ impl ImuMode {
     fn key(self) -> &'static str {
         match self {
             Self::None => "none",
+            Self::Loose => "loose",
             Self::Tight => "tight",
             Self::Accel => "accel",
             Self::Combined => "combined",
@@ -150,7 +154,7 @@ impl ImuMode {
 struct FitConfig {
     /// Adam steps per fit (scaled by `[run] iterations_scale`).
     iterations: usize,
-    /// IMU modes to compare: `"none"`, `"tight"`, `"accel"`, `"combined"`.
+    /// IMU modes to compare: `"none"`, `"loose"`, `"tight"`, `"accel"`, `"combined"`.
     imu: Vec<ImuMode>,
     /// Weight of the pose loss (squared error of quaternions and of normalised positions: about
     /// 1e-4 at 1° of rotation error). Against the L1 gyro residual of real data (about 0.1 rad/s
@@ -160,8 +164,10 @@ struct FitConfig {
     gyro_weight: f64,
     /// Weight of the accelerometer loss (paper: 1).
     accel_weight: f64,
-    /// IMU samples per step (a seeded shuffle is cycled through).
+    /// IMU samples per step (a seeded shuffle is cycled through); for `loose`, windows per step.
     imu_batch: usize,
+    /// Length of the windows the gyroscope is integrated over in `loose` mode, seconds.
+    loose_window_secs: f64,
     /// Initial learning rate of translation parameters (paper: 1e-3).
     lr_translation: f64,
     /// Initial learning rate of rotation parameters (paper: 2e-4).
@@ -181,6 +187,7 @@ impl Default for FitConfig {
             gyro_weight: 1.0,
             accel_weight: 1.0,
             imu_batch: 64,
+            loose_window_secs: 0.1,
             lr_translation: 1e-3,
             lr_rotation: 2e-4,
             lr_pose: 1e-2,
@@ -515,6 +522,7 @@ impl Fit<'_> {
             Vec::with_capacity(batch),
         );
         let mut imu_order = self.imu_order.clone();
+        let mut pairs = Vec::with_capacity(batch);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut cursor = imu_order.len();
         let decay = |lr: f64| ExponentialDecay {
@@ -542,7 +550,31 @@ impl Fit<'_> {
                 &mut cot,
             );
             field.backward(&self.seq.known_times, &cot, &mut grad)?;
-            if mode != ImuMode::None {
+            if mode == ImuMode::Loose {
+                // Windows [t_k, t_k + window] from a shuffled IMU index; the gyro integrated
+                // over each supervises the rotation between its ends.
+                imu_times.clear();
+                pairs.clear();
+                for _ in 0..batch {
+                    if cursor == imu_order.len() {
+                        imu_order.shuffle(&mut rng);
+                        cursor = 0;
+                    }
+                    let t0 = self.seq.imu[imu_order[cursor]].t_secs;
+                    cursor += 1;
+                    let t1 = t0 + self.cfg.loose_window_secs;
+                    if let Some(dq) = losses::integrate_gyro(&self.seq.imu, t0, t1) {
+                        pairs.push((imu_times.len(), imu_times.len() + 1, dq));
+                        imu_times.extend([t0, t1]);
+                    }
+                }
+                if !pairs.is_empty() {
+                    field.forward(&imu_times, Order::Pose, &mut out)?;
+                    cot.reset(imu_times.len(), Order::Pose);
+                    loss += losses::gyro_loose_l1(&out, &pairs, self.cfg.gyro_weight, &mut cot);
+                    field.backward(&imu_times, &cot, &mut grad)?;
+                }
+            } else if mode != ImuMode::None {
                 imu_times.clear();
                 gyro.clear();
                 accel.clear();
@@ -603,6 +635,15 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             config.path().display(),
             exp.fit.imu,
             exp.data.source
+        );
+    }
+    if exp.fit.imu.contains(&ImuMode::Loose)
+        && !(exp.fit.loose_window_secs > 0.0 && exp.fit.loose_window_secs.is_finite())
+    {
+        bail!(
+            "{}: [fit] loose_window_secs = {} must be a positive number of seconds",
+            config.path().display(),
+            exp.fit.loose_window_secs
         );
     }
     if exp.fields.is_empty() {
