@@ -393,7 +393,7 @@ impl PoseNetTracker {
             (self.seed ^ 0x5EED_7AC4).wrapping_add((index as u64).wrapping_mul(0x9E37_79B9)),
         );
         if self.config.fresh_optimizer {
-            self.adam = Adam::new(self.grad.len());
+            self.adam.reset();
         }
     }
 

@@ -34,6 +34,13 @@ impl<S: Real> Adam<S> {
         }
     }
 
+    /// Back to the zero state (a new optimiser over the same parameters, without allocating).
+    pub fn reset(&mut self) {
+        self.m.fill(S::ZERO);
+        self.v.fill(S::ZERO);
+        self.t = 0;
+    }
+
     /// Steps taken so far.
     pub fn steps(&self) -> u64 {
         self.t
@@ -149,6 +156,11 @@ mod tests {
         assert!((p[0] - 0.900000002).abs() < 1e-12);
         adam.step(&mut p, &[-1.0], 0.1);
         assert!((p[0] - 0.93661035).abs() < 1e-8, "{}", p[0]);
+        // After a reset the first step is the first step of a new optimiser again.
+        adam.reset();
+        let mut q = [1.0];
+        adam.step(&mut q, &[0.5], 0.1);
+        assert!((q[0] - 0.900000002).abs() < 1e-12 && adam.steps() == 1);
     }
 
     #[test]
