@@ -5,25 +5,22 @@
 //! All losses are means over their samples, times a weight.
 
 use cpose_core::PoseBatch;
+use cpose_core::nn::l1_subgradient;
 use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::imu::ImuSample;
 
 /// The sign of each component, 0 at 0 (the L1 subgradient).
 fn sign_q(q: &Quaternion<f64>) -> Quaternion<f64> {
-    Quaternion::new(sgn(q.w), sgn(q.i), sgn(q.j), sgn(q.k))
-}
-fn sgn(x: f64) -> f64 {
-    if x > 0.0 {
-        1.0
-    } else if x < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
+    Quaternion::new(
+        l1_subgradient(q.w),
+        l1_subgradient(q.i),
+        l1_subgradient(q.j),
+        l1_subgradient(q.k),
+    )
 }
 fn sign_v(v: &Vector3<f64>) -> Vector3<f64> {
-    v.map(sgn)
+    v.map(l1_subgradient)
 }
 fn l1_q(q: &Quaternion<f64>) -> f64 {
     q.coords.abs().sum()

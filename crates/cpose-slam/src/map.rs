@@ -34,7 +34,7 @@ pub const TRACKING_COLOR_WEIGHT: f32 = 0.5;
 
 /// The map's density scale ([`HashGridConfig::density_scale`]), per metre: with open rays the
 /// depth loss has to build opaque surfaces a few centimetres thick, hundreds per metre.
-const DENSITY_SCALE: f64 = 30.0;
+pub const DENSITY_SCALE: f64 = 30.0;
 
 /// Most samples per ray.
 const MAX_SAMPLES: usize = 256;

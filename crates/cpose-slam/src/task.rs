@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{Reader, Writer};
 use crate::data::{RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
-use crate::map::{MapConfig, NeuralMap, PixelSample};
+use crate::map::{DENSITY_SCALE, MapConfig, NeuralMap, PixelSample};
 use crate::slam::{MappingConfig, Slam, TrackingConfig};
 use crate::surface::{COMPLETION_RADIUS, score_mesh};
 use crate::synth::{RoomConfig, generate_room};
@@ -81,7 +81,7 @@ impl Default for MeshConfig {
     fn default() -> Self {
         Self {
             voxel: 0.04,
-            level: 30.0,
+            level: DENSITY_SCALE as f32,
             margin: 0.05,
         }
     }

@@ -15,7 +15,7 @@
 //! Both receive the gradient of the loss with respect to `world_from_camera` as raw partials
 //! `(∂L/∂q, ∂L/∂t)` ([`cpose_nerf::camera::PoseGradient::quaternion_translation`]).
 
-use cpose_core::nn::Adam;
+use cpose_core::nn::{Adam, l1_subgradient};
 use cpose_core::pose_field::posenet::PoseNetConfig;
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
@@ -476,10 +476,10 @@ pub fn dof_loss(
     let flip = if q.w < 0.0 { -1.0 } else { 1.0 };
     let (omega, jac) = rotation_vector_jacobian(&(q * flip));
     let k = 2.0 / view_angle;
-    let g_omega = omega.map(|x| k * sign(x));
+    let g_omega = omega.map(|x| k * l1_subgradient(x));
     let gq = jac.transpose() * g_omega * flip;
     let norm = v.norm() + DOF_EPS;
-    let sign = v.map(sign);
+    let sign = v.map(l1_subgradient);
     let l1 = v.abs().sum();
     // ∂/∂v of Σ|v_k|/(‖v‖ + ε) = sign/(‖v‖ + ε) − Σ|v_k| v/(‖v‖ (‖v‖ + ε)²).
     let gv = if v.norm() > 0.0 {
@@ -489,17 +489,6 @@ pub fn dof_loss(
     };
     let loss = k * omega.abs().sum() + l1 / norm;
     (loss, Quaternion::new(gq[0], gq[1], gq[2], gq[3]), gv)
-}
-
-/// The sign, `0` at `0` (the subgradient of `|x|` there; `f64::signum(0.0)` is 1).
-fn sign(x: f64) -> f64 {
-    if x > 0.0 {
-        1.0
-    } else if x < 0.0 {
-        -1.0
-    } else {
-        0.0
-    }
 }
 
 /// `ε` of the DOF loss's translation normalisation, metres.
@@ -629,7 +618,7 @@ impl PoseModel for IntrinsicTracker {
             // O in O ∘ I: the correction cotangent with I as the initial pose, plus ‖v_o‖₁.
             let (gq_o, gt_o) =
                 cpose_nerf::nerf::poses::correction_cotangent(&m, &o.rotation, &gq_rel, &gt_rel);
-            let gt_o = gt_o + o.translation.vector.map(sign) * self.config.origin_weight;
+            let gt_o = gt_o + o.translation.vector.map(l1_subgradient) * self.config.origin_weight;
             self.origin.step_relative(&gq_o, &gt_o)?;
         }
         Ok(())
@@ -790,18 +779,23 @@ mod tests {
         assert!(start.rotation.angle_to(&want.rotation) < 1e-12);
     }
 
+    /// A PoseNet small enough for central differences over all its parameters.
+    fn tiny_network() -> PoseNetConfig {
+        PoseNetConfig {
+            depth: 3,
+            width: 8,
+            skip_layer: 0,
+            ..PoseNetConfig::default()
+        }
+    }
+
     /// The gradient PoseNetTracker passes to the network matches central differences of the
     /// loss of `T_ref ∘ PN(t)` in the network's parameters.
     #[test]
     fn posenet_relative_gradient_matches_central_differences() {
         let range = TimeRange::new(0.0, 1.0).unwrap();
         let config = PoseNetTrackConfig {
-            network: PoseNetConfig {
-                depth: 3,
-                width: 8,
-                skip_layer: 0,
-                ..PoseNetConfig::default()
-            },
+            network: tiny_network(),
             ..PoseNetTrackConfig::default()
         };
         let mut tracker = PoseNetTracker::new(&config, Reference::Previous, range, 3).unwrap();
@@ -964,12 +958,7 @@ mod tests {
     fn intrinsic_gradient_matches_central_differences() {
         let range = TimeRange::new(0.0, 1.0).unwrap();
         let posenet = PoseNetTrackConfig {
-            network: PoseNetConfig {
-                depth: 3,
-                width: 8,
-                skip_layer: 0,
-                ..PoseNetConfig::default()
-            },
+            network: tiny_network(),
             lr_translation: 1.0,
             lr_rotation: 1.0,
             ..PoseNetTrackConfig::default()

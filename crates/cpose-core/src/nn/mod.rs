@@ -34,3 +34,15 @@ pub fn batch_parts(rows: usize) -> usize {
 pub fn part_range(n: usize, parts: usize, p: usize) -> std::ops::Range<usize> {
     (p * n / parts)..((p + 1) * n / parts)
 }
+
+/// The sign of `x`, `0` at `0`: the subgradient of `|x|` that L1 losses use (`f64::signum`
+/// gives 1 at 0).
+pub fn l1_subgradient(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
+    }
+}
