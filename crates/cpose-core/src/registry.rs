@@ -59,7 +59,11 @@ pub struct TaskInput<'a> {
 
 impl TaskInput<'_> {
     /// A progress bar over `len` steps (hidden unless enabled and stderr is a terminal).
-    pub fn progress(&self, len: u64, message: &'static str) -> Progress {
+    pub fn progress(
+        &self,
+        len: u64,
+        message: impl Into<std::borrow::Cow<'static, str>>,
+    ) -> Progress {
         Progress::new(len, message, self.show_progress)
     }
 }

@@ -1,6 +1,8 @@
 //! IMU measurements in the body frame.
 
+use cpose_core::Order;
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
 /// One IMU reading.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -12,4 +14,51 @@ pub struct ImuSample {
     /// Specific force in the body frame, m/s²: `f = Rᵀ (p̈ − g_world)` (≈ +9.81 up at rest;
     /// see `cpose_core::geometry::specific_force_body`).
     pub accel: Vector3<f64>,
+}
+
+/// How IMU readings supervise a pose field, named as in configs and `metrics.json`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
+#[serde(rename_all = "lowercase")]
+pub enum ImuMode {
+    /// Poses only.
+    None,
+    /// Plus the gyroscope integrated between two times (the paper's loose coupling).
+    Loose,
+    /// Plus the gyroscope through `q̇` (the paper's tight coupling).
+    Tight,
+    /// Plus the accelerometer through `p̈`.
+    Accel,
+    /// Plus both.
+    Combined,
+}
+
+impl ImuMode {
+    /// Whether the gyroscope enters through `q̇` (tight, combined).
+    pub fn gyro(self) -> bool {
+        matches!(self, Self::Tight | Self::Combined)
+    }
+    /// Whether the accelerometer enters through `p̈` (accel, combined).
+    pub fn accel(self) -> bool {
+        matches!(self, Self::Accel | Self::Combined)
+    }
+    /// The derivative order the field must give.
+    pub fn order(self) -> Order {
+        if self.accel() {
+            Order::Acceleration
+        } else if self.gyro() {
+            Order::Velocity
+        } else {
+            Order::Pose
+        }
+    }
+    /// The mode's name.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Loose => "loose",
+            Self::Tight => "tight",
+            Self::Accel => "accel",
+            Self::Combined => "combined",
+        }
+    }
 }

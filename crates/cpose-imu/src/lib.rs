@@ -7,10 +7,12 @@ pub mod euroc;
 pub mod imu;
 pub mod losses;
 pub mod sim;
+mod slam_imu;
+pub mod tracker;
 mod trajectory;
 
 pub use cpose_slam;
-pub use imu::ImuSample;
+pub use imu::{ImuMode, ImuSample};
 
 /// Errors reading IMU and trajectory data.
 #[derive(Debug, thiserror::Error)]

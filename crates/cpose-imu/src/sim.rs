@@ -7,7 +7,7 @@
 
 use cpose_core::random::standard_normal;
 use cpose_core::{Order, PoseBatch, PoseField, PoseFieldError};
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -67,50 +67,149 @@ pub fn simulate_imu(
 ) -> Result<SimulatedImu, PoseFieldError> {
     let mut batch = PoseBatch::default();
     field.evaluate(times, Order::Acceleration, &mut batch)?;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut normal3 = || {
-        Vector3::new(
-            standard_normal(&mut rng),
-            standard_normal(&mut rng),
-            standard_normal(&mut rng),
-        )
-    };
+    let samples = times
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| {
+            let rotation = UnitQuaternion::new_normalize(batch.rotation[i]);
+            ImuSample {
+                t_secs: t,
+                gyro: batch.ang_vel_body(i),
+                accel: rotation.inverse_transform_vector(&(batch.lin_acc_world[i] - gravity)),
+            }
+        })
+        .collect();
+    Ok(with_noise(samples, noise, seed))
+}
+
+/// The paper's IMU from a camera trajectory (supplement, "Implementation details", its ScanNet
+/// protocol): the poses at `times` are interpolated to `rate_hz` — a natural cubic spline for
+/// the translation, slerp for the rotation — and differentiated numerically at that rate:
+/// `ω_k = Log(R_{k−1}ᵀ R_{k+1}) / 2Δt` and `p̈_k = (p_{k+1} − 2 p_k + p_{k−1}) / Δt²` (one-sided
+/// at the ends), `f_k = R_kᵀ (p̈_k − g)`. Readings start at `times[0]` and end by the last time.
+/// `None` if fewer than two poses, times not increasing, or `rate_hz` not positive.
+pub fn imu_from_poses(
+    times: &[f64],
+    poses: &[Isometry3<f64>],
+    rate_hz: f64,
+    gravity: &Vector3<f64>,
+    noise: Option<&NoiseModel>,
+    seed: u64,
+) -> Option<SimulatedImu> {
     let n = times.len();
-    let mut out = SimulatedImu {
-        samples: Vec::with_capacity(n),
-        gyro_bias: Vec::with_capacity(n),
-        accel_bias: Vec::with_capacity(n),
-    };
+    if n < 2 || poses.len() != n || !(rate_hz > 0.0) || times.windows(2).any(|w| w[1] <= w[0]) {
+        return None;
+    }
+    let positions: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
+    let curvature = natural_spline_second_derivatives(times, &positions);
+    let dt = 1.0 / rate_hz;
+    let m = ((times[n - 1] - times[0]) * rate_hz).floor() as usize + 1;
+    if m < 3 {
+        return None;
+    }
+    let grid: Vec<f64> = (0..m).map(|k| times[0] + k as f64 * dt).collect();
+    let (mut p, mut r) = (Vec::with_capacity(m), Vec::with_capacity(m));
+    for &t in &grid {
+        let i = times.partition_point(|&x| x <= t).clamp(1, n - 1) - 1;
+        let h = times[i + 1] - times[i];
+        let (a, b) = ((times[i + 1] - t) / h, (t - times[i]) / h);
+        p.push(
+            positions[i] * a
+                + positions[i + 1] * b
+                + (curvature[i] * (a * a * a - a) + curvature[i + 1] * (b * b * b - b)) * (h * h)
+                    / 6.0,
+        );
+        r.push(
+            poses[i]
+                .rotation
+                .slerp(&poses[i + 1].rotation, b.clamp(0.0, 1.0)),
+        );
+    }
+    let samples = (0..m)
+        .map(|k| {
+            let (lo, hi) = (k.saturating_sub(1), (k + 1).min(m - 1));
+            let gyro = (r[lo].inverse() * r[hi]).scaled_axis() / ((hi - lo) as f64 * dt);
+            // The second difference at the nearest interior sample.
+            let c = k.clamp(1, m - 2);
+            let acc = (p[c + 1] - p[c] * 2.0 + p[c - 1]) / (dt * dt);
+            ImuSample {
+                t_secs: grid[k],
+                gyro,
+                accel: r[k].inverse_transform_vector(&(acc - gravity)),
+            }
+        })
+        .collect();
+    Some(with_noise(samples, noise, seed))
+}
+
+/// `M_i = S''(t_i)` of the natural cubic spline through `(t_i, y_i)` (`M_0 = M_{n−1} = 0`):
+/// `h_{i−1} M_{i−1} + 2 (h_{i−1} + h_i) M_i + h_i M_{i+1} = 6 (Δ_i − Δ_{i−1})`, `Δ_i = (y_{i+1} −
+/// y_i)/h_i`, solved by the Thomas algorithm.
+fn natural_spline_second_derivatives(t: &[f64], y: &[Vector3<f64>]) -> Vec<Vector3<f64>> {
+    let n = t.len();
+    let mut m = vec![Vector3::zeros(); n];
+    if n < 3 {
+        return m;
+    }
+    let h: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let slope = |i: usize| (y[i + 1] - y[i]) / h[i];
+    // Forward sweep over the interior unknowns 1..n−1.
+    let (mut c_prime, mut d_prime) = (vec![0.0; n], vec![Vector3::zeros(); n]);
+    for i in 1..n - 1 {
+        let (a, b, c) = (h[i - 1], 2.0 * (h[i - 1] + h[i]), h[i]);
+        let d = (slope(i) - slope(i - 1)) * 6.0;
+        let denom = b - a * c_prime[i - 1];
+        c_prime[i] = c / denom;
+        d_prime[i] = (d - d_prime[i - 1] * a) / denom;
+    }
+    for i in (1..n - 1).rev() {
+        m[i] = d_prime[i] - m[i + 1] * c_prime[i];
+    }
+    m
+}
+
+/// Adds `noise` (white noise on a random-walk bias) to clean readings.
+fn with_noise(mut samples: Vec<ImuSample>, noise: Option<&NoiseModel>, seed: u64) -> SimulatedImu {
+    let n = samples.len();
     let (mut bg, mut ba) = noise.map_or((Vector3::zeros(), Vector3::zeros()), |m| {
         (m.initial_gyro_bias, m.initial_accel_bias)
     });
-    for (i, &t) in times.iter().enumerate() {
-        let rotation = UnitQuaternion::new_normalize(batch.rotation[i]);
-        let mut gyro = batch.ang_vel_body(i);
-        let mut accel = rotation.inverse_transform_vector(&(batch.lin_acc_world[i] - gravity));
-        if let Some(m) = noise {
-            // The sampling interval: the spacing to the neighbouring time.
-            let dt = match (i.checked_sub(1), times.get(i + 1)) {
-                (Some(p), _) => t - times[p],
-                (None, Some(next)) => next - t,
+    let (mut gyro_bias, mut accel_bias) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    if let Some(m) = noise {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut normal3 = || {
+            Vector3::new(
+                standard_normal(&mut rng),
+                standard_normal(&mut rng),
+                standard_normal(&mut rng),
+            )
+        };
+        for i in 0..n {
+            // The sampling interval: the spacing to the neighbouring reading.
+            let t = samples[i].t_secs;
+            let dt = match (i.checked_sub(1), samples.get(i + 1)) {
+                (Some(p), _) => t - samples[p].t_secs,
+                (None, Some(next)) => next.t_secs - t,
                 (None, None) => 1.0,
             };
             if i > 0 {
                 bg += normal3() * (m.gyro_random_walk * dt.sqrt());
                 ba += normal3() * (m.accel_random_walk * dt.sqrt());
             }
-            gyro += bg + normal3() * (m.gyro_noise_density / dt.sqrt());
-            accel += ba + normal3() * (m.accel_noise_density / dt.sqrt());
+            samples[i].gyro += bg + normal3() * (m.gyro_noise_density / dt.sqrt());
+            samples[i].accel += ba + normal3() * (m.accel_noise_density / dt.sqrt());
+            gyro_bias.push(bg);
+            accel_bias.push(ba);
         }
-        out.samples.push(ImuSample {
-            t_secs: t,
-            gyro,
-            accel,
-        });
-        out.gyro_bias.push(bg);
-        out.accel_bias.push(ba);
+    } else {
+        gyro_bias.resize(n, bg);
+        accel_bias.resize(n, ba);
     }
-    Ok(out)
+    SimulatedImu {
+        samples,
+        gyro_bias,
+        accel_bias,
+    }
 }
 
 #[cfg(test)]
@@ -120,7 +219,6 @@ mod tests {
     use cpose_core::pose_field::LieSplinePoses;
     use cpose_core::pose_field::sinusoid::SinusoidMotion;
     use cpose_core::{TimeRange, gravity_world};
-    use nalgebra::Isometry3;
 
     fn rms(v: impl Iterator<Item = f64>) -> f64 {
         let (mut s, mut n) = (0.0, 0);
@@ -129,6 +227,57 @@ mod tests {
             n += 1;
         }
         (s / n as f64).sqrt()
+    }
+
+    /// The paper's protocol (30 Hz poses → 200 Hz, cubic and slerp, numerical derivatives)
+    /// against the exact derivatives of a smooth hand-held motion.
+    #[test]
+    fn imu_from_interpolated_poses_matches_the_exact_imu() {
+        let range = TimeRange::new(0.0, 20.0).unwrap();
+        let mut motion = SinusoidMotion::<f64>::handheld(range, 5);
+        let g = gravity_world();
+        let frame_times: Vec<f64> = (0..=600).map(|k| k as f64 / 30.0).collect();
+        let mut batch = PoseBatch::default();
+        motion
+            .evaluate(&frame_times, Order::Pose, &mut batch)
+            .unwrap();
+        let poses: Vec<Isometry3<f64>> = (0..frame_times.len())
+            .map(|i| batch.world_from_body(i))
+            .collect();
+        let sim = imu_from_poses(&frame_times, &poses, 200.0, &g, None, 0).unwrap();
+        assert_eq!(sim.samples.len(), 4001);
+        assert_eq!(sim.samples[0].t_secs, 0.0);
+        // Away from the ends (natural boundary conditions bend the spline there).
+        let inner: Vec<&ImuSample> = sim
+            .samples
+            .iter()
+            .filter(|s| s.t_secs > 0.5 && s.t_secs < 19.5)
+            .collect();
+        let times: Vec<f64> = inner.iter().map(|s| s.t_secs).collect();
+        let exact = simulate_imu(&mut motion, &times, &g, None, 0).unwrap();
+        let err = |f: fn(&ImuSample) -> Vector3<f64>| {
+            rms(inner
+                .iter()
+                .zip(&exact.samples)
+                .flat_map(|(a, b)| (f(a) - f(b)).iter().copied().collect::<Vec<_>>()))
+        };
+        let signal = |f: fn(&ImuSample) -> Vector3<f64>| {
+            rms(exact
+                .samples
+                .iter()
+                .flat_map(|s| f(s).iter().copied().collect::<Vec<_>>()))
+        };
+        let (gyro, accel) = (err(|s| s.gyro), err(|s| s.accel));
+        // Measured: gyro 0.028 of 0.52 rad/s RMS — slerp holds the rate constant over each
+        // 33 ms interval, an error of about |ω̇| Δt/√12 — and accel 0.012 of 7.5 m/s².
+        assert!(gyro < 0.08 * signal(|s| s.gyro), "gyro RMS error {gyro}");
+        assert!(
+            accel < 0.003 * signal(|s| s.accel),
+            "accel RMS error {accel}"
+        );
+        // Degenerate input.
+        assert!(imu_from_poses(&frame_times[..1], &poses[..1], 200.0, &g, None, 0).is_none());
+        assert!(imu_from_poses(&[1.0, 0.5], &poses[..2], 200.0, &g, None, 0).is_none());
     }
 
     #[test]

@@ -29,7 +29,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::euroc::EurocSequence;
-use crate::imu::ImuSample;
+use crate::imu::{ImuMode, ImuSample};
 use crate::losses;
 use cpose_core::gravity_world;
 
@@ -102,50 +102,6 @@ fn default_imu_rate() -> f64 {
 }
 fn default_known_every() -> usize {
     20
-}
-
-/// IMU supervision of a fit, named as in `metrics.json`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
-#[serde(rename_all = "lowercase")]
-enum ImuMode {
-    /// Poses only.
-    None,
-    /// Plus the gyroscope integrated over windows of `loose_window_secs` (the paper's loose
-    /// coupling).
-    Loose,
-    /// Plus the gyroscope through `q̇` (the paper's tight coupling).
-    Tight,
-    /// Plus the accelerometer through `p̈`.
-    Accel,
-    /// Plus both.
-    Combined,
-}
-
-impl ImuMode {
-    fn gyro(self) -> bool {
-        matches!(self, Self::Tight | Self::Combined)
-    }
-    fn accel(self) -> bool {
-        matches!(self, Self::Accel | Self::Combined)
-    }
-    fn order(self) -> Order {
-        if self.accel() {
-            Order::Acceleration
-        } else if self.gyro() {
-            Order::Velocity
-        } else {
-            Order::Pose
-        }
-    }
-    fn key(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::Loose => "loose",
-            Self::Tight => "tight",
-            Self::Accel => "accel",
-            Self::Combined => "combined",
-        }
-    }
 }
 
 /// `[fit]`: optimisation shared by every field.

@@ -202,6 +202,19 @@ impl PoseGradient {
         Vector6::new(omega.x, omega.y, omega.z, v.x, v.y, v.z)
     }
 
+    /// The gradient with respect to `world_from_body` of a camera mounted at `body_from_camera`
+    /// (`world_from_camera = world_from_body ∘ body_from_camera`): the rays leave from
+    /// `t_b + R_b t_c` along `R_b R_c d_cam`, so the origin offset `t_c` enters the moment as a
+    /// rotated vector with cotangent `G_o`: `M_b = M R_cᵀ + G_o t_cᵀ`.
+    pub fn to_body(&self, body_from_camera: &Isometry3<f64>) -> PoseGradient {
+        let rc = body_from_camera.rotation.to_rotation_matrix();
+        let tc = body_from_camera.translation.vector;
+        PoseGradient {
+            sum_grad_origin: self.sum_grad_origin,
+            moment: self.moment * rc.matrix().transpose() + self.sum_grad_origin * tc.transpose(),
+        }
+    }
+
     /// `(∂L/∂q, ∂L/∂t)`: raw partials with respect to the components of `q` (w first) of
     /// `q ⊗ (0, d_cam) ⊗ q*`, and with respect to the translation — a `PoseBatch` cotangent.
     pub fn quaternion_translation(
@@ -338,6 +351,35 @@ mod tests {
                 g[k]
             );
         }
+    }
+
+    #[test]
+    fn body_gradient_of_an_offset_camera_matches_central_differences() {
+        let cam = camera();
+        let body = pose();
+        let body_from_camera = Isometry3::from_parts(
+            Translation3::new(-0.02, -0.065, 0.3),
+            UnitQuaternion::from_euler_angles(-1.5, 0.2, 1.6),
+        );
+        let g = accumulate(&cam, &(body * body_from_camera))
+            .to_body(&body_from_camera)
+            .left_se3(&body);
+        let h = 1e-6;
+        for k in 0..6 {
+            let mut xi = Vector6::zeros();
+            xi[k] = h;
+            let lp = total_loss(&cam, &(se3_exp(&xi) * body * body_from_camera));
+            let lm = total_loss(&cam, &(se3_exp(&(-xi)) * body * body_from_camera));
+            let fd = (lp - lm) / (2.0 * h);
+            assert!(
+                (fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "k={k}: fd {fd} vs {}",
+                g[k]
+            );
+        }
+        // The identity mount changes nothing.
+        let direct = accumulate(&cam, &body);
+        assert_eq!(direct.to_body(&Isometry3::identity()), direct);
     }
 
     #[test]

@@ -31,7 +31,7 @@ fn bench(c: &mut Criterion) {
         .camera_poses();
     let scene = room_scene();
     let frame = |i: usize| {
-        let (color, depth) = render_frame(&scene, &camera, &poses[i], 2, true, 0, i);
+        let (color, depth) = render_frame(&scene, &camera, &poses[i], 2, true, 0, i, 1.0);
         RgbdFrame {
             index: i,
             time: i as f64 / config.frame_rate,

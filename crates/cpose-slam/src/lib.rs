@@ -11,5 +11,5 @@ pub mod slam;
 pub mod surface;
 pub mod synth;
 mod synth_task;
-mod task;
+pub mod task;
 pub mod track;

@@ -107,6 +107,10 @@ pub struct Slam {
     mapping: MappingConfig,
     /// Estimated `world_from_camera` of every processed frame.
     pub estimates: Vec<Isometry3<f64>>,
+    /// The same as `world_from_body` ([`Slam::set_body_from_camera`]), what the model tracks.
+    bodies: Vec<Isometry3<f64>>,
+    /// The camera's mount on the tracked body (identity: the body is the camera).
+    body_from_camera: Isometry3<f64>,
     /// Keyframes with their run index.
     keyframes: Vec<(usize, RgbdFrame)>,
     seed: u64,
@@ -143,11 +147,20 @@ impl Slam {
             tracking: tracking.clone(),
             mapping: mapping.clone(),
             estimates: Vec::new(),
+            bodies: Vec::new(),
+            body_from_camera: Isometry3::identity(),
             keyframes: Vec::new(),
             seed,
             pixels: Vec::new(),
             pose_grads: Vec::new(),
         })
+    }
+
+    /// Mounts the camera on a body (an IMU rig) at `body_from_camera`: from then on the pose
+    /// model tracks `world_from_body`, and frames are seen from `world_from_body ∘
+    /// body_from_camera` (the estimates stay camera poses). Set it before the first frame.
+    pub fn set_body_from_camera(&mut self, body_from_camera: Isometry3<f64>) {
+        self.body_from_camera = body_from_camera;
     }
 
     /// A mesh of the map on `grid` at density `level`, culled to the space the keyframes saw:
@@ -200,6 +213,12 @@ impl Slam {
         mut frame: impl FnMut(usize) -> anyhow::Result<RgbdFrame>,
     ) -> anyhow::Result<()> {
         self.estimates = r.poses()?;
+        let camera_from_body = self.body_from_camera.inverse();
+        self.bodies = self
+            .estimates
+            .iter()
+            .map(|c| c * camera_from_body)
+            .collect();
         self.keyframes.clear();
         for i in r.f64s()? {
             let i = i as usize;
@@ -217,7 +236,7 @@ impl Slam {
         )
     }
 
-    /// Processes the next frame: frame 0 is placed at `start` (its true pose) and initialises
+    /// Processes the next frame: frame 0 is placed at `start` (its true camera pose) and initialises
     /// the map; later frames are tracked with `model`. Maps when due. Returns the tracking
     /// report (none for frame 0).
     pub fn process(
@@ -229,6 +248,7 @@ impl Slam {
         let index = self.estimates.len();
         let report = if index == 0 {
             self.estimates.push(start);
+            self.bodies.push(start * self.body_from_camera.inverse());
             None
         } else {
             let r = self.track(&frame, index, model)?;
@@ -253,12 +273,14 @@ impl Slam {
         index: usize,
         model: &mut dyn PoseModel,
     ) -> anyhow::Result<TrackReport> {
-        let start = model.begin(index, frame.time, &self.estimates)?;
+        let mount = self.body_from_camera;
+        let start = model.begin(index, frame.time, &self.bodies)?;
         let mut rng = self.rng(index, 1);
         let mut best = (f64::INFINITY, start, 0.0);
         self.pose_grads.resize(1, PoseGradient::new());
         for _ in 0..self.tracking.iterations {
-            let pose = model.pose();
+            let body = model.pose();
+            let pose = body * mount;
             let edge = self.tracking.edge;
             sample_pixels(
                 frame,
@@ -281,15 +303,18 @@ impl Slam {
                 anyhow::bail!("tracking loss is {loss} at frame {index}");
             }
             if loss < best.0 {
-                best = (loss, pose, self.map.depth_error());
+                best = (loss, body, self.map.depth_error());
             }
-            let (gq, gt) = self.pose_grads[0].quaternion_translation(&pose.rotation);
+            let (gq, gt) = self.pose_grads[0]
+                .to_body(&mount)
+                .quaternion_translation(&body.rotation);
             model.step(&gq, &gt)?;
         }
-        let pose = best.1;
-        model.finish(index, frame.time, &pose)?;
-        self.estimates.push(pose);
-        let moved = (pose.translation.vector - start.translation.vector).norm();
+        let body = best.1;
+        model.finish(index, frame.time, &body)?;
+        self.bodies.push(body);
+        self.estimates.push(body * mount);
+        let moved = (body.translation.vector - start.translation.vector).norm();
         let depth_error = best.2;
         Ok(TrackReport {
             loss: best.0 / self.tracking.pixels as f64,
@@ -427,7 +452,7 @@ mod tests {
         pose: &Isometry3<f64>,
         i: usize,
     ) -> RgbdFrame {
-        let (color, depth) = render_frame(&room_scene(), camera, pose, 1, true, 0, i);
+        let (color, depth) = render_frame(&room_scene(), camera, pose, 1, true, 0, i, 1.0);
         RgbdFrame {
             index: i,
             time: i as f64 / config.frame_rate,

@@ -31,6 +31,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{DepthImage, Intrinsics, REPLICA_INTRINSICS, RgbdError, write_replica};
 
+/// Half the room's inner extent along x and y, metres (walls at `±3`, `±2.5`).
+const ROOM_HALF: [f64; 2] = [3.0, 2.5];
+
+/// The ceiling's height, metres.
+const ROOM_HEIGHT: f64 = 2.8;
+
 /// Largest angle between the viewing ray and the surface normal with a depth reading, degrees.
 const DROPOUT_INCIDENCE_DEG: f64 = 80.0;
 
@@ -59,6 +65,9 @@ pub struct RoomConfig {
     pub supersample: usize,
     /// Seed of the hand-held walk and of the depth noise.
     pub seed: u64,
+    /// Size of the room and everything in it relative to the built-in 6 × 5 × 2.8 m (textures
+    /// scale with it); `1.5` gives a 9 × 7.5 × 4.2 m hall, about EuRoC's flying room.
+    pub scale: f64,
 }
 
 impl Default for RoomConfig {
@@ -72,6 +81,7 @@ impl Default for RoomConfig {
             depth_noise: true,
             supersample: 2,
             seed: 0,
+            scale: 1.0,
         }
     }
 }
@@ -109,6 +119,9 @@ impl RoomConfig {
                 "supersample = {} must lie in 1..=8",
                 self.supersample
             ));
+        }
+        if !(self.scale.is_finite() && (0.1..=10.0).contains(&self.scale)) {
+            return Err(format!("scale = {} must lie in [0.1, 10]", self.scale));
         }
         if !(self.trajectory_offset_s.is_finite() && self.trajectory_offset_s >= 0.0) {
             return Err(format!(
@@ -250,9 +263,9 @@ fn interpolate(trajectory: &Trajectory, t: f64) -> Option<Isometry3<f64>> {
     ))
 }
 
-/// Renders frame `index` at `world_from_camera`: colour with `supersample²` rays per pixel, the
-/// depth of the pixel-centre ray with the noise model when `noise` (seeded by `seed` and
-/// `index`, so a frame is the same whenever it is rendered).
+/// Renders frame `index` at `world_from_camera` in `scene` enlarged `scale` times: colour with
+/// `supersample²` rays per pixel, the depth of the pixel-centre ray with the noise model when
+/// `noise` (seeded by `seed` and `index`, so a frame is the same whenever it is rendered).
 pub fn render_frame(
     scene: &SyntheticScene,
     camera: &PinholeCamera,
@@ -261,9 +274,13 @@ pub fn render_frame(
     noise: bool,
     seed: u64,
     index: usize,
+    scale: f64,
 ) -> (Image, DepthImage) {
-    let view = scene.render(camera, world_from_camera, supersample);
-    let origin = world_from_camera.translation.vector;
+    // The enlarged scene seen from `p` is the scene seen from `p / scale`, distances × scale.
+    let mut unit_pose = *world_from_camera;
+    unit_pose.translation.vector /= scale;
+    let view = scene.render(camera, &unit_pose, supersample);
+    let origin = unit_pose.translation.vector;
     let rotation = world_from_camera.rotation.to_rotation_matrix();
     let cos_max = DROPOUT_INCIDENCE_DEG.to_radians().cos();
     let (w, h) = (camera.width, camera.height);
@@ -280,7 +297,7 @@ pub fn render_frame(
                     let Some(hit) = scene.trace(&origin, &d) else {
                         return 0.0;
                     };
-                    let z = hit.t; // camera z-depth (d_cam.z = 1)
+                    let z = hit.t * scale; // camera z-depth (d_cam.z = 1)
                     if !noise {
                         return z as f32;
                     }
@@ -303,11 +320,9 @@ pub fn render_frame(
 pub fn generate_room(
     config: &RoomConfig,
     root: &Path,
-    mut on_frame: impl FnMut(usize, usize),
+    on_frame: impl FnMut(usize, usize),
 ) -> Result<usize, RgbdError> {
     let motion = RoomMotion::from_config(config)?;
-    let intrinsics = config.intrinsics();
-    let camera = intrinsics.camera_for(intrinsics.width, intrinsics.height, root)?;
     let poses = motion.camera_poses();
     if poses.len() < 2 {
         return Err(RgbdError::Layout {
@@ -315,9 +330,23 @@ pub fn generate_room(
             message: "the trajectory covers fewer than two frames".into(),
         });
     }
+    render_room(config, &poses, root, on_frame)
+}
+
+/// Renders the room from the cameras `world_from_camera` (with `config`'s camera, noise and
+/// anti-aliasing; its motion settings are not used) and writes them to `root` in the Replica
+/// layout. Returns the number of frames written.
+pub fn render_room(
+    config: &RoomConfig,
+    poses: &[Isometry3<f64>],
+    root: &Path,
+    mut on_frame: impl FnMut(usize, usize),
+) -> Result<usize, RgbdError> {
+    let intrinsics = config.intrinsics();
+    let camera = intrinsics.camera_for(intrinsics.width, intrinsics.height, root)?;
     let scene = room_scene();
     let n = poses.len();
-    write_replica(root, &intrinsics, &poses, |i| {
+    write_replica(root, &intrinsics, poses, |i| {
         on_frame(i, n);
         render_frame(
             &scene,
@@ -327,9 +356,84 @@ pub fn generate_room(
             config.depth_noise,
             config.seed,
             i,
+            config.scale,
         )
     })?;
     Ok(n)
+}
+
+/// Where a recorded flight fits in the room enlarged `scale` times: the gravity-aligned
+/// `room_from_world` (a turn about z by a multiple of 90° and a horizontal shift on a 10 cm
+/// grid; heights unchanged) that keeps `positions` inside the walls and farthest from every
+/// surface (the smallest distance to a surface along 26 directions, over all positions).
+/// Returns it with that clearance, metres; the clearance is negative if no placement keeps
+/// every position inside the room.
+pub fn fit_in_room(positions: &[Vector3<f64>], scale: f64) -> (Isometry3<f64>, f64) {
+    let scene = room_scene();
+    let directions: Vec<Vector3<f64>> = (0..27)
+        .filter(|&k| k != 13)
+        .map(|k| {
+            Vector3::new(
+                (k % 3) as f64 - 1.0,
+                ((k / 3) % 3) as f64 - 1.0,
+                (k / 9) as f64 - 1.0,
+            )
+            .normalize()
+        })
+        .collect();
+    // At most 200 positions, evenly spread over the flight.
+    let step = positions.len().div_ceil(200).max(1);
+    let probe: Vec<Vector3<f64>> = positions.iter().step_by(step).copied().collect();
+    let clearance = |p: &Vector3<f64>| {
+        let p = p / scale;
+        if p.x.abs() >= ROOM_HALF[0]
+            || p.y.abs() >= ROOM_HALF[1]
+            || p.z <= 0.0
+            || p.z >= ROOM_HEIGHT
+        {
+            return -1.0;
+        }
+        scale
+            * directions
+                .iter()
+                .map(|d| scene.trace(&p, d).map_or(f64::INFINITY, |h| h.t))
+                .fold(f64::INFINITY, f64::min)
+    };
+    let mut best = (Isometry3::identity(), f64::NEG_INFINITY);
+    for quarter in 0..4 {
+        let turn = UnitQuaternion::from_axis_angle(
+            &Vector3::z_axis(),
+            quarter as f64 * std::f64::consts::FRAC_PI_2,
+        );
+        let turned: Vec<Vector3<f64>> = probe.iter().map(|p| turn * p).collect();
+        let lo = turned
+            .iter()
+            .fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(p));
+        let hi = turned
+            .iter()
+            .fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(p));
+        // Shifts around the one that centres the flight, ±0.8 m.
+        let centre = -(lo + hi) / 2.0;
+        for i in -8..=8 {
+            for j in -8..=8 {
+                let shift = Vector3::new(centre.x + 0.1 * i as f64, centre.y + 0.1 * j as f64, 0.0);
+                let mut worst = f64::INFINITY;
+                for p in &turned {
+                    worst = worst.min(clearance(&(p + shift)));
+                    if worst <= best.1 {
+                        break;
+                    }
+                }
+                if worst > best.1 {
+                    best = (
+                        Isometry3::from_parts(Translation3::from(shift), turn),
+                        worst,
+                    );
+                }
+            }
+        }
+    }
+    best
 }
 
 /// A standard normal draw (Box–Muller).
@@ -604,7 +708,7 @@ mod tests {
                 "{i}: {c}"
             );
             // Every pixel of a closed room has a surface, none nearer than 0.3 m.
-            let (_, depth) = render_frame(&scene, &camera.scaled(0.1), pose, 1, false, 0, i);
+            let (_, depth) = render_frame(&scene, &camera.scaled(0.1), pose, 1, false, 0, i, 1.0);
             let min = depth.data().iter().cloned().fold(f32::INFINITY, f32::min);
             assert!(min > 0.3, "frame {i}: nearest surface {min} m");
         }
@@ -619,9 +723,9 @@ mod tests {
             .unwrap();
         let pose =
             room_start() * Isometry3::from_parts(Translation3::identity(), rig_from_camera());
-        let (_, exact) = render_frame(&scene, &camera, &pose, 1, false, 0, 7);
-        let (_, noisy) = render_frame(&scene, &camera, &pose, 1, true, 0, 7);
-        let (_, again) = render_frame(&scene, &camera, &pose, 1, true, 0, 7);
+        let (_, exact) = render_frame(&scene, &camera, &pose, 1, false, 0, 7, 1.0);
+        let (_, noisy) = render_frame(&scene, &camera, &pose, 1, true, 0, 7, 1.0);
+        let (_, again) = render_frame(&scene, &camera, &pose, 1, true, 0, 7, 1.0);
         assert_eq!(noisy, again);
         let mut z2 = Vec::new();
         let mut dropped = 0;

@@ -23,7 +23,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint::{Reader, Writer};
-use crate::data::{RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
+use crate::data::{RgbdError, RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
 use crate::map::{DENSITY_SCALE, MapConfig, NeuralMap, PixelSample};
 use crate::slam::{MappingConfig, Slam, TrackingConfig};
 use crate::surface::{COMPLETION_RADIUS, score_mesh};
@@ -64,17 +64,17 @@ struct Experiment {
     slam: SlamConfig,
 }
 
-/// The map's surface, written as `mesh_<method>.ply` after each method.
-#[derive(Debug, Deserialize)]
+/// The map's surface, written as `mesh_<method>.ply` after each method; `[mesh]` in a config.
+#[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-struct MeshConfig {
+pub struct MeshConfig {
     /// Grid spacing of the marching tetrahedra, metres (0: no mesh).
-    voxel: f64,
+    pub voxel: f64,
     /// The density of the surface, 1/m (the map's density scale: on the synthetic room the
     /// iso-surface lies within millimetres of the true one; lower levels sit in front of it).
-    level: f32,
+    pub level: f32,
     /// Triangles more than this far behind every keyframe's measured depth are culled, metres.
-    margin: f64,
+    pub margin: f64,
 }
 
 impl Default for MeshConfig {
@@ -87,25 +87,45 @@ impl Default for MeshConfig {
     }
 }
 
-/// Where the frames come from.
+/// Where the frames come from; `[data]` in a config.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct DataConfig {
-    source: Source,
+pub struct DataConfig {
+    /// The dataset's layout.
+    pub source: Source,
     /// The sequence folder (for `synthetic`: where the room is generated).
-    path: PathBuf,
+    pub path: PathBuf,
     /// Resolution factor in (0, 1].
     #[serde(default = "one")]
-    resolution: f64,
+    pub resolution: f64,
     /// Pixels cut from every side (NICE-SLAM: ScanNet 10, TUM 8).
     #[serde(default)]
-    crop_edge: usize,
+    pub crop_edge: usize,
     /// Replica's frame rate (its files have no timestamps).
     #[serde(default = "thirty")]
-    frame_rate: f64,
-    /// Use only the first this many frames (0: all).
+    pub frame_rate: f64,
+    /// Keep every this many frames (a faster camera: 30 Hz with `stride = 6` is 5 Hz); 0 or 1
+    /// keeps all.
+    #[serde(default = "one_frame")]
+    pub stride: usize,
+    /// Use only the first this many frames (after `stride`; 0: all).
     #[serde(default)]
-    frames: usize,
+    pub frames: usize,
+}
+
+impl DataConfig {
+    /// The number of frames to run on out of `available`.
+    pub fn frames_of(&self, available: usize) -> usize {
+        if self.frames == 0 {
+            available
+        } else {
+            self.frames.min(available)
+        }
+    }
+}
+
+fn one_frame() -> usize {
+    1
 }
 
 fn one() -> f64 {
@@ -116,21 +136,26 @@ fn thirty() -> f64 {
     30.0
 }
 
+/// A dataset layout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
-enum Source {
+pub enum Source {
+    /// The synthetic room in the Replica layout, generated into `path` on first use.
     Synthetic,
+    /// NICE-SLAM's Replica.
     Replica,
+    /// ScanNet.
     Scannet,
+    /// TUM RGB-D.
     Tum,
 }
 
 /// The map's region: either an axis-aligned box (`box = [[x0, x1], [y0, y1], [z0, z1]]`, as
 /// NICE-SLAM's `mapping.bound`) or a ball (`centre`, `radius`); the grid covers the cube around
-/// it. Default: the synthetic room.
+/// it. Default: the synthetic room. `[bounds]` in a config.
 #[derive(Clone, Copy, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-struct BoundsConfig {
+pub struct BoundsConfig {
     centre: Option<[f64; 3]>,
     radius: Option<f64>,
     #[serde(rename = "box")]
@@ -139,7 +164,7 @@ struct BoundsConfig {
 
 impl BoundsConfig {
     /// The box to mesh: the configured box, or the cube around the ball.
-    fn mesh_box(&self) -> anyhow::Result<([f64; 3], [f64; 3])> {
+    pub fn mesh_box(&self) -> anyhow::Result<([f64; 3], [f64; 3])> {
         if let Some(b) = self.aabb {
             return Ok((b.map(|a| a[0]), b.map(|a| a[1])));
         }
@@ -150,7 +175,8 @@ impl BoundsConfig {
         ))
     }
 
-    fn scene_bounds(&self) -> anyhow::Result<SceneBounds> {
+    /// The map's region, checked.
+    pub fn scene_bounds(&self) -> anyhow::Result<SceneBounds> {
         let (centre, radius) = match (self.aabb, self.centre, self.radius) {
             (Some(b), None, None) => {
                 if b.iter()
@@ -236,12 +262,17 @@ struct MethodResult {
     extra: BTreeMap<String, f64>,
 }
 
-fn open_sequence(exp: &Experiment, input: &TaskInput) -> anyhow::Result<RgbdSequence> {
-    let d = &exp.data;
+/// The RGB-D sequence `[data]` names (the synthetic room is generated on first use), all its
+/// frames (`data.stride` is applied by the caller: [`RgbdSequence::every`]).
+pub fn open_sequence(
+    d: &DataConfig,
+    synthetic: &RoomConfig,
+    input: &TaskInput,
+) -> anyhow::Result<RgbdSequence> {
     let seq = match d.source {
         Source::Synthetic => {
-            ensure_synthetic(&exp.synthetic, &d.path, input)?;
-            read_replica(&d.path, None, d.resolution, exp.synthetic.frame_rate)?
+            ensure_synthetic(synthetic, &d.path, input)?;
+            read_replica(&d.path, None, d.resolution, synthetic.frame_rate)?
         }
         Source::Replica => {
             if !d.path.join("results").is_dir() {
@@ -265,23 +296,38 @@ fn open_sequence(exp: &Experiment, input: &TaskInput) -> anyhow::Result<RgbdSequ
 /// Bumped whenever the room, the walk or the noise model changes, so stale data is rebuilt.
 const GENERATOR_VERSION: &str = "synthetic room v1";
 
-/// Generates the synthetic room into `path` unless it already holds this exact configuration
-/// (recorded in `synthetic.json` once every frame is written).
+/// Generates the synthetic room into `path` unless it already holds this exact configuration.
 fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyhow::Result<()> {
-    let stamp = path.join("synthetic.json");
-    let wanted = serde_json::to_string_pretty(&serde_json::json!({
+    let recipe = serde_json::json!({
         "generator": GENERATOR_VERSION,
         "synthetic": config,
-    }))?;
+    });
+    ensure_generated(path, &recipe, config.frames, input, |on_frame| {
+        generate_room(config, path, on_frame)
+    })
+}
+
+/// Runs `generate` (which writes a dataset into `path`, reporting `(frame, frames)` as it goes,
+/// and returns the number of frames) unless `path` already holds what `recipe` describes:
+/// the recipe is recorded in `path/synthetic.json` once every frame is written.
+pub fn ensure_generated(
+    path: &Path,
+    recipe: &serde_json::Value,
+    frames: usize,
+    input: &TaskInput,
+    generate: impl FnOnce(&mut dyn FnMut(usize, usize)) -> Result<usize, RgbdError>,
+) -> anyhow::Result<()> {
+    let stamp = path.join("synthetic.json");
+    let wanted = serde_json::to_string_pretty(recipe)?;
     if std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted) {
         input
             .run_dir
-            .log(format_args!("synthetic room: reusing {}", path.display()));
+            .log(format_args!("synthetic data: reusing {}", path.display()));
         return Ok(());
     }
     let started = Instant::now();
-    let progress = input.progress(config.frames as u64, "rendering room");
-    let n = generate_room(config, path, |i, n| {
+    let progress = input.progress(frames as u64, "rendering");
+    let n = generate(&mut |i, n| {
         progress.set_length(n as u64);
         progress.set_position(i as u64);
     })?;
@@ -289,7 +335,7 @@ fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyh
     cpose_core::fs::write_atomic(&stamp, wanted.as_bytes())
         .with_context(|| format!("writing {}", stamp.display()))?;
     input.run_dir.log(format_args!(
-        "synthetic room: generated {n} frames in {} ({:.1} s)",
+        "synthetic data: generated {n} frames in {} ({:.1} s)",
         path.display(),
         started.elapsed().as_secs_f64()
     ));
@@ -297,32 +343,150 @@ fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyh
 }
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let mut exp: Experiment = input.config.parse_params()?;
-    // `run.iterations_scale` scales the optimiser steps (at least one each).
-    for steps in [
-        &mut exp.tracking.iterations,
-        &mut exp.mapping.iterations,
-        &mut exp.mapping.first_iterations,
-    ] {
-        *steps = input.run.iterations(*steps).max(1);
-    }
+    let exp: Experiment = input.config.parse_params()?;
     if exp.slam.methods.is_empty() {
         bail!(
             "slam.methods is empty: name at least one of baseline, prev, world, random, intrinsic"
         );
     }
-    let seq = open_sequence(&exp, input)?;
-    let n = if exp.data.frames == 0 {
-        seq.len()
-    } else {
-        exp.data.frames.min(seq.len())
-    };
-    if n < 2 {
+    let setup = SlamSetup::new(
+        input,
+        exp.map,
+        exp.tracking,
+        exp.mapping,
+        &exp.bounds,
+        &exp.mesh,
+        exp.slam.checkpoint_every,
+    )?;
+    let seq = open_sequence(&exp.data, &exp.synthetic, input)?.every(exp.data.stride);
+    let n = exp.data.frames_of(seq.len());
+    let range = frame_range(&seq, n)?;
+    let (posenet, intrinsic, seed) = (&exp.posenet, &exp.intrinsic, input.run.seed);
+    let camera = seq.camera;
+    let methods: Vec<(String, ModelFactory)> = exp
+        .slam
+        .methods
+        .iter()
+        .map(|&method| {
+            let factory: ModelFactory = match method {
+                Method::Baseline => {
+                    let (lr, factor) = (setup.tracking.lr, setup.tracking.rotation_lr_factor);
+                    Box::new(move || Ok(Box::new(FreePose::new(lr, factor)) as Box<dyn PoseModel>))
+                }
+                Method::Prev | Method::World | Method::Random => {
+                    let reference = match method {
+                        Method::Prev => Reference::Previous,
+                        Method::World => Reference::World,
+                        _ => Reference::Random,
+                    };
+                    Box::new(move || {
+                        Ok(Box::new(PoseNetTracker::new(posenet, reference, range, seed)?) as _)
+                    })
+                }
+                Method::Intrinsic => {
+                    let view_angle = 2.0 * (0.5 * camera.width as f64 / camera.fx).atan();
+                    Box::new(move || {
+                        Ok(Box::new(IntrinsicTracker::new(
+                            posenet, intrinsic, range, view_angle, seed,
+                        )?) as _)
+                    })
+                }
+            };
+            (method.key().to_string(), factory)
+        })
+        .collect();
+    run_methods(input, &seq, n, &setup, &methods)?;
+    Ok(())
+}
+
+/// The time span of the first `n ≥ 2` frames of `seq` (a pose field's domain).
+pub fn frame_range(seq: &RgbdSequence, n: usize) -> anyhow::Result<TimeRange> {
+    if n < 2 || seq.len() < n {
         bail!(
-            "{}: need at least two frames, found {n}",
-            seq.root.display()
+            "{}: need at least two frames, found {}",
+            seq.root.display(),
+            n.min(seq.len())
         );
     }
+    let times = seq.times();
+    TimeRange::new(times[0], times[n - 1])
+        .context("frame times must increase from the first to the last frame")
+}
+
+/// What every SLAM task shares besides its frames and pose models: the map, tracking and
+/// mapping settings (optimiser steps already scaled by `run.iterations_scale`), the map's region,
+/// the mesh grid and the checkpoint interval.
+pub struct SlamSetup {
+    /// `[map]`.
+    pub map: MapConfig,
+    /// `[tracking]`.
+    pub tracking: TrackingConfig,
+    /// `[mapping]`.
+    pub mapping: MappingConfig,
+    /// The map's region.
+    pub bounds: SceneBounds,
+    /// The grid, level and culling margin of the mesh; none: no mesh.
+    pub mesh: Option<(Grid, f32, f64)>,
+    /// Frames between checkpoints (0: none).
+    pub checkpoint_every: usize,
+    /// The camera's mount on the tracked body (identity: the body is the camera).
+    pub body_from_camera: Isometry3<f64>,
+}
+
+impl SlamSetup {
+    /// Checks and assembles the settings; `run.iterations_scale` scales the optimiser steps
+    /// (at least one each).
+    pub fn new(
+        input: &TaskInput,
+        map: MapConfig,
+        mut tracking: TrackingConfig,
+        mut mapping: MappingConfig,
+        bounds: &BoundsConfig,
+        mesh: &MeshConfig,
+        checkpoint_every: usize,
+    ) -> anyhow::Result<Self> {
+        for steps in [
+            &mut tracking.iterations,
+            &mut mapping.iterations,
+            &mut mapping.first_iterations,
+        ] {
+            *steps = input.run.iterations(*steps).max(1);
+        }
+        let mesh = if mesh.voxel > 0.0 {
+            let (min, max) = bounds.mesh_box()?;
+            let grid = Grid::covering(min, max, mesh.voxel).context("[mesh]")?;
+            Some((grid, mesh.level, mesh.margin))
+        } else {
+            None
+        };
+        Ok(Self {
+            map,
+            tracking,
+            mapping,
+            bounds: bounds.scene_bounds()?,
+            mesh,
+            checkpoint_every,
+            body_from_camera: Isometry3::identity(),
+        })
+    }
+}
+
+/// Builds a fresh pose model for one method's run.
+pub type ModelFactory<'a> = Box<dyn Fn() -> anyhow::Result<Box<dyn PoseModel>> + 'a>;
+
+/// Runs SLAM on the first `n` frames of `seq` once per `(key, model)` method and writes, per
+/// method, `traj_<key>.txt`, `trajectory_<key>.png`, `view_<key>.png`, `mesh_<key>.ply` and its
+/// entry in `metrics.json` (also `traj_gt.txt`). On `--resume`, methods already in
+/// `metrics.json` are skipped and an interrupted one continues from its checkpoint. Returns
+/// the metrics.
+pub fn run_methods(
+    input: &TaskInput,
+    seq: &RgbdSequence,
+    n: usize,
+    setup: &SlamSetup,
+    methods: &[(String, ModelFactory)],
+) -> anyhow::Result<BTreeMap<String, serde_json::Value>> {
+    frame_range(seq, n)?;
     let times: Vec<f64> = seq.times()[..n].to_vec();
     // Ground truth: frames with a finite pose (NICE-SLAM drops the others from the ATE).
     let truth = &seq.truth[..n];
@@ -348,18 +512,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         } else {
             String::new()
         },
-        exp.slam.methods.iter().map(|m| m.key()).collect::<Vec<_>>()
+        methods.iter().map(|m| m.0.as_str()).collect::<Vec<_>>()
     ));
     let start = truth[0].unwrap_or_else(Isometry3::identity);
-    let bounds = exp.bounds.scene_bounds()?;
-    let mesh_grid = if exp.mesh.voxel > 0.0 {
-        let (min, max) = exp.bounds.mesh_box()?;
-        Some(Grid::covering(min, max, exp.mesh.voxel).context("[mesh]")?)
-    } else {
-        None
-    };
-    let range = TimeRange::new(times[0], times[n - 1])
-        .context("frame times must increase from the first to the last frame")?;
     // On resume, methods already in metrics.json are done.
     let metrics_path = input.run_dir.file("metrics.json");
     let mut results: BTreeMap<String, serde_json::Value> = if input.resume {
@@ -370,49 +525,27 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     } else {
         BTreeMap::new()
     };
-    for &method in &exp.slam.methods {
-        if results.contains_key(method.key()) {
+    for (key, factory) in methods {
+        let key = key.as_str();
+        if results.contains_key(key) {
             input
                 .run_dir
-                .log(format_args!("{}: finished before the resume", method.key()));
+                .log(format_args!("{key}: finished before the resume"));
             continue;
         }
         let started = Instant::now();
-        let map = NeuralMap::new(&exp.map, bounds).map_err(|m| anyhow::anyhow!("map: {m}"))?;
-        let mut slam = Slam::new(map, seq.camera, &exp.tracking, &exp.mapping, input.run.seed)?;
-        let mut model: Box<dyn PoseModel> = match method {
-            Method::Baseline => Box::new(FreePose::new(
-                exp.tracking.lr,
-                exp.tracking.rotation_lr_factor,
-            )),
-            Method::Prev | Method::World | Method::Random => {
-                let reference = match method {
-                    Method::Prev => Reference::Previous,
-                    Method::World => Reference::World,
-                    _ => Reference::Random,
-                };
-                Box::new(PoseNetTracker::new(
-                    &exp.posenet,
-                    reference,
-                    range,
-                    input.run.seed,
-                )?)
-            }
-            Method::Intrinsic => {
-                let c = &seq.camera;
-                let view_angle = 2.0 * (0.5 * c.width as f64 / c.fx).atan();
-                Box::new(IntrinsicTracker::new(
-                    &exp.posenet,
-                    &exp.intrinsic,
-                    range,
-                    view_angle,
-                    input.run.seed,
-                )?)
-            }
-        };
-        let checkpoint = input
-            .run_dir
-            .file(format!("checkpoint_{}.bin", method.key()));
+        let map =
+            NeuralMap::new(&setup.map, setup.bounds).map_err(|m| anyhow::anyhow!("map: {m}"))?;
+        let mut slam = Slam::new(
+            map,
+            seq.camera,
+            &setup.tracking,
+            &setup.mapping,
+            input.run.seed,
+        )?;
+        slam.set_body_from_camera(setup.body_from_camera);
+        let mut model = factory()?;
+        let checkpoint = input.run_dir.file(format!("checkpoint_{key}.bin"));
         let mut lost: Vec<usize> = Vec::new();
         let (mut first, mut earlier_s) = (0, 0.0);
         if input.resume && checkpoint.is_file() {
@@ -424,13 +557,13 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             model.load(&mut r)?;
             input.run_dir.log(format_args!(
                 "{}: resumed after frame {first} from {}",
-                method.key(),
+                key,
                 checkpoint.display()
             ));
         }
-        let progress = input.progress(n as u64, method.key());
+        let progress = input.progress(n as u64, key.to_string());
         progress.set_position(first as u64);
-        let every = exp.slam.checkpoint_every;
+        let every = setup.checkpoint_every;
         for i in first..n {
             let frame = seq.load(i)?;
             let report = slam.process(frame, start, model.as_mut())?;
@@ -441,10 +574,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     input.run_dir.log(format_args!(
                         "{}: track lost at frame {i} (moved {:.3} m while tracking, median depth \
                          error {:.3} m, loss {:.3})",
-                        method.key(),
-                        r.moved,
-                        r.depth_error,
-                        r.loss
+                        key, r.moved, r.depth_error, r.loss
                     ));
                 }
                 lost.push(i);
@@ -465,7 +595,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 });
                 input.run_dir.log(format_args!(
                     "{} {}/{n}: position error {:.2} cm, {:.2} frames/s",
-                    method.key(),
+                    key,
                     i + 1,
                     100.0 * err,
                     (i + 1 - first) as f64 / started.elapsed().as_secs_f64()
@@ -475,20 +605,15 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         progress.finish();
         let wall_s = earlier_s + started.elapsed().as_secs_f64();
         let all = Trajectory::new(times.clone(), slam.estimates.clone())?;
-        write_tum(
-            input.run_dir.file(format!("traj_{}.txt", method.key())),
-            &all,
-        )?;
-        let plot = input
-            .run_dir
-            .file(format!("trajectory_{}.png", method.key()));
+        write_tum(input.run_dir.file(format!("traj_{}.txt", key)), &all)?;
+        let plot = input.run_dir.file(format!("trajectory_{}.png", key));
         let scored = match &gt {
             Some(gt) => {
                 let est = Trajectory::new(
                     valid.iter().map(|&i| times[i]).collect(),
                     valid.iter().map(|&i| slam.estimates[i]).collect(),
                 )?;
-                let (report, alignment) = score(gt, &est, input, method.key())?;
+                let (report, alignment) = score(gt, &est, input, key)?;
                 let (_, aligned) = align_poses(gt.poses(), est.poses(), alignment)?;
                 trajectory_plot(512, gt.poses(), &[], &aligned).save_png(&plot)?;
                 Some((report, alignment))
@@ -498,16 +623,16 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 None
             }
         };
-        save_view(&mut slam, &seq, n - 1, input, method.key())?;
+        save_view(&mut slam, &seq, n - 1, input, key)?;
         let mut surface = None;
-        if let Some(grid) = &mesh_grid {
-            let mesh = slam.mesh(grid, exp.mesh.level, exp.mesh.margin);
-            let path = input.run_dir.file(format!("mesh_{}.ply", method.key()));
+        if let Some((grid, level, margin)) = &setup.mesh {
+            let mesh = slam.mesh(grid, *level, *margin);
+            let path = input.run_dir.file(format!("mesh_{}.ply", key));
             mesh.write_ply(&path)?;
             surface = score_mesh(&mesh, &seq, truth, n)?;
             input.run_dir.log(format_args!(
                 "{}: mesh of {} triangles ({:.1} m²) in {}{}",
-                method.key(),
+                key,
                 mesh.triangles.len(),
                 mesh.area(),
                 path.display(),
@@ -549,16 +674,14 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         };
         input.run_dir.log(format_args!(
             "{}: {ate}, {:.2} frames/s, {:.0} s",
-            method.key(),
-            result.fps,
-            wall_s
+            key, result.fps, wall_s
         ));
-        results.insert(method.key().to_string(), serde_json::to_value(&result)?);
+        results.insert(key.to_string(), serde_json::to_value(&result)?);
         input.run_dir.write_json("metrics.json", &results)?;
         // Finished: its checkpoint (the map, megabytes) is no longer needed.
         let _ = std::fs::remove_file(&checkpoint);
     }
-    Ok(())
+    Ok(results)
 }
 
 /// The ATE of `est` against `gt` with SE(3) alignment, as NICE-SLAM and `cpose eval ate`; a

@@ -254,6 +254,29 @@ impl RgbdSequence {
         self.frames.is_empty()
     }
 
+    /// Every `stride`-th frame (from the first), as a camera `stride` times faster would see
+    /// the scene; `stride ≤ 1` keeps all.
+    pub fn every(mut self, stride: usize) -> Self {
+        if stride > 1 {
+            let keep = |i: &usize| i % stride == 0;
+            self.frames = self
+                .frames
+                .into_iter()
+                .enumerate()
+                .filter(|(i, _)| keep(i))
+                .map(|(_, f)| f)
+                .collect();
+            self.truth = self
+                .truth
+                .into_iter()
+                .enumerate()
+                .filter(|(i, _)| keep(i))
+                .map(|(_, t)| t)
+                .collect();
+        }
+        self
+    }
+
     /// Frame timestamps, seconds.
     pub fn times(&self) -> Vec<f64> {
         self.frames.iter().map(|f| f.time).collect()

@@ -1,0 +1,592 @@
+//! PoseNet tracking with an IMU (paper §3.4 and its supplement): the RGB-D tracking of
+//! [`cpose_slam`] with the gyroscope and accelerometer supervising PoseNet's time derivatives
+//! between frames.
+//!
+//! PoseNet gives the body's motion as one function of time in the frame of the first body pose,
+//! `PN(t) ≈ T_0⁻¹ T(t)`, so the IMU relations hold everywhere: `q̇ = ½ q ⊗ (0, ω)` and
+//! `f = Rᵀ (p̈ − g_PN)` with gravity `g_PN` in the network's frame. A frame is placed relative to
+//! the previous one, as the paper's default reference: `T_i = A ∘ PN(t_i)` with the anchor
+//! `A = T_{i−1} ∘ PN(t_{i−1})⁻¹` taken when the frame starts, so only the network's motion since
+//! the previous frame counts (its drift from the earlier estimates does not).
+//!
+//! Per frame `i`, with the readings in `(t_{i−1}, t_i]`:
+//! 1. **Prediction** (`imu.predict_steps`): Adam on the IMU loss while the poses of the last
+//!    `imu.hold_frames` frames hold the network in place — the IMU carries the pose forward
+//!    from the previous frame (without IMU the start is the network's own extrapolation).
+//! 2. **Tracking**: every step adds the IMU loss to the tracking loss, `L_track/P + λ_g L_gyro +
+//!    λ_a L_acc` (per pixel, `P = tracking.pixels`; the paper's weights are 1 and 1).
+//! 3. **Memory**: the chosen pose is kept and PoseNet re-fitted on the list, as without IMU.
+//!
+//! Gyroscope losses: loose (the rotation integrated from `t_{i−1}` to `t_i`), tight (`q̇` at
+//! every reading); the accelerometer through `p̈` ([`crate::losses`]).
+
+use anyhow::bail;
+use cpose_core::nn::Adam;
+use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
+use cpose_slam::checkpoint::{Reader, Writer};
+use cpose_slam::track::{PoseModel, PoseNetTrackConfig};
+use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::imu::{ImuMode, ImuSample};
+use crate::losses;
+
+/// The prediction's hold on the latest positions: an error of this size costs one unit of the
+/// per-pixel tracking loss.
+const HOLD_METRES: f64 = 0.01;
+
+/// IMU coupling in tracking; `[imu]` in a `slam_imu` config.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ImuTrackConfig {
+    /// Weight `λ_g` of the gyroscope loss (loose or tight) against the tracking loss per pixel.
+    pub gyro_weight: f64,
+    /// Weight `λ_a` of the accelerometer loss.
+    pub accel_weight: f64,
+    /// Adam steps on the IMU loss alone before a frame is tracked (0: none).
+    pub predict_steps: usize,
+    /// The latest frames whose poses hold the network during prediction.
+    pub hold_frames: usize,
+    /// At most this many readings per step, evenly spread over the interval.
+    pub max_readings: usize,
+}
+
+impl Default for ImuTrackConfig {
+    fn default() -> Self {
+        Self {
+            gyro_weight: 1.0,
+            accel_weight: 1.0,
+            predict_steps: 20,
+            hold_frames: 3,
+            max_readings: 64,
+        }
+    }
+}
+
+impl ImuTrackConfig {
+    /// Checks the values; the message names the key.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        for (key, w) in [
+            ("gyro_weight", self.gyro_weight),
+            ("accel_weight", self.accel_weight),
+        ] {
+            if !(w.is_finite() && w >= 0.0) {
+                bail!("imu.{key} = {w} must be finite and ≥ 0");
+            }
+        }
+        if self.max_readings == 0 || self.hold_frames == 0 {
+            bail!("imu.max_readings and imu.hold_frames must be ≥ 1");
+        }
+        Ok(())
+    }
+}
+
+/// PoseNet with IMU losses (module docs).
+pub struct ImuPoseNet {
+    net: Box<dyn PoseField<f32>>,
+    config: PoseNetTrackConfig,
+    imu_config: ImuTrackConfig,
+    mode: ImuMode,
+    /// Readings in the body frame, sorted by time (the frames' clock).
+    imu: Vec<ImuSample>,
+    gravity_world: Vector3<f64>,
+    /// `P`: the tracking loss is a sum over this many pixels.
+    pixels: f64,
+    adam: Adam<f32>,
+    refit_adam: Adam<f32>,
+    grad: Vec<f32>,
+    out: PoseBatch,
+    cot: PoseBatch,
+    /// `T_0`: the network's frame in the world.
+    reference: Isometry3<f64>,
+    /// The anchor of the frame being tracked: `A_R` and `a` of `T(t) = (A_R R_PN(t), R_0 p_PN(t)
+    /// + a)`.
+    anchor_rotation: UnitQuaternion<f64>,
+    anchor_translation: Vector3<f64>,
+    /// `PN(t_i)` of the frame being tracked.
+    current: Isometry3<f64>,
+    /// The step's times: the readings, then `t_{i−1}` and `t_i`.
+    times: Vec<f64>,
+    gyro: Vec<Vector3<f64>>,
+    accel: Vec<Vector3<f64>>,
+    /// The gyroscope's rotation from `t_{i−1}` to `t_i` (loose coupling).
+    delta: Option<UnitQuaternion<f64>>,
+    /// `(t_j, T_0⁻¹ T_j)` of every frame.
+    memory: Vec<(f64, Isometry3<f64>)>,
+    seed: u64,
+    rng: ChaCha8Rng,
+}
+
+impl ImuPoseNet {
+    /// A PoseNet over `range` at the identity, coupled to `imu` (body frame, the frames' clock)
+    /// by `mode`; gravity `gravity_world` in the world frame; `pixels` per tracking step.
+    pub fn new(
+        config: &PoseNetTrackConfig,
+        imu_config: &ImuTrackConfig,
+        mode: ImuMode,
+        imu: Vec<ImuSample>,
+        gravity_world: Vector3<f64>,
+        pixels: usize,
+        range: TimeRange,
+        seed: u64,
+    ) -> anyhow::Result<Self> {
+        imu_config.validate()?;
+        let mut network = config.network.clone();
+        network.seed = network.seed.wrapping_add(seed);
+        let net: Box<dyn PoseField<f32>> = Box::new(network.init::<f32>(range)?);
+        let n = net.num_params();
+        Ok(Self {
+            net,
+            config: config.clone(),
+            imu_config: imu_config.clone(),
+            mode,
+            imu,
+            gravity_world,
+            pixels: pixels.max(1) as f64,
+            adam: Adam::new(n),
+            refit_adam: Adam::new(n),
+            grad: vec![0.0; n],
+            out: PoseBatch::default(),
+            cot: PoseBatch::default(),
+            reference: Isometry3::identity(),
+            anchor_rotation: UnitQuaternion::identity(),
+            anchor_translation: Vector3::zeros(),
+            current: Isometry3::identity(),
+            times: Vec::new(),
+            gyro: Vec::new(),
+            accel: Vec::new(),
+            delta: None,
+            memory: Vec::new(),
+            seed,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+        })
+    }
+
+    fn lr(&self) -> impl Fn(ParamKind) -> f64 + use<> {
+        let (r, t) = (self.config.lr_rotation, self.config.lr_translation);
+        move |kind| match kind {
+            ParamKind::Rotation => r,
+            _ => t,
+        }
+    }
+
+    /// Collects the readings in `(from, t1]` (at most `max_readings`, evenly spread), then `t0`
+    /// and `t1`, into the step's times; the loose rotation between `t0` and `t1`.
+    fn gather(&mut self, from: f64, t0: f64, t1: f64) {
+        self.times.clear();
+        self.gyro.clear();
+        self.accel.clear();
+        self.delta = None;
+        if self.mode != ImuMode::None {
+            let lo = self.imu.partition_point(|s| s.t_secs <= from);
+            let hi = self.imu.partition_point(|s| s.t_secs <= t1);
+            let count = hi - lo;
+            let take = count.min(self.imu_config.max_readings);
+            if self.mode == ImuMode::Loose {
+                self.delta = losses::integrate_gyro(&self.imu, t0, t1);
+            } else {
+                for k in 0..take {
+                    let s = &self.imu[lo + k * count / take];
+                    self.times.push(s.t_secs);
+                    self.gyro.push(s.gyro);
+                    self.accel.push(s.accel);
+                }
+            }
+        }
+        self.times.extend([t0, t1]);
+    }
+
+    /// Forward over the step's times and the IMU loss into `cot` (scaled by `scale`); the
+    /// readings are the batch's first entries, `t_{i−1}` and `t_i` its last two.
+    fn imu_loss(&mut self, scale: f64, with_accel: bool) -> anyhow::Result<f64> {
+        let order = self.mode.order();
+        self.net.forward(&self.times, order, &mut self.out)?;
+        self.cot.reset(self.times.len(), order);
+        let k = self.gyro.len();
+        let (wg, wa) = (
+            self.imu_config.gyro_weight * scale,
+            self.imu_config.accel_weight * scale,
+        );
+        let mut loss = 0.0;
+        if self.mode.gyro() && k > 0 {
+            loss += losses::gyro_tight_l1(&self.out, &self.gyro, wg, &mut self.cot);
+        }
+        if with_accel && self.mode.accel() && k > 0 {
+            // f = R_PNᵀ A_Rᵀ (R_0 p̈_PN − g) = R_PNᵀ (M p̈_PN − A_Rᵀ g), M = A_Rᵀ R_0: the loss on
+            // `M p̈`, its cotangent pulled back by Mᵀ.
+            let m = self.anchor_rotation.inverse() * self.reference.rotation;
+            let g = self.anchor_rotation.inverse() * self.gravity_world;
+            for a in &mut self.out.lin_acc_world[..k] {
+                *a = m * *a;
+            }
+            // The rotation is taken as given (the paper rotates the readings with the gyro's
+            // rotation): only p̈ learns from the accelerometer.
+            let rotation_cot = self.cot.rotation[..k].to_vec();
+            loss += losses::accel_l1(&self.out, &self.accel, &g, 1.0, wa, &mut self.cot);
+            self.cot.rotation[..k].copy_from_slice(&rotation_cot);
+            for c in &mut self.cot.lin_acc_world[..k] {
+                *c = m.inverse() * *c;
+            }
+        }
+        if let Some(dq) = self.delta {
+            loss += losses::gyro_loose_l1(&self.out, &[(k, k + 1, dq)], wg, &mut self.cot);
+        }
+        Ok(loss)
+    }
+
+    /// The network at `t_i`, `PN(t_i)`.
+    fn evaluate(&mut self) -> anyhow::Result<()> {
+        let t = *self.times.last().expect("gather() pushes t_i");
+        self.net.forward(&[t], Order::Pose, &mut self.out)?;
+        self.current = self.out.world_from_body(0);
+        Ok(())
+    }
+
+    /// Prediction: Adam on the IMU loss plus the squared pose error of the latest frames.
+    fn predict(&mut self) -> anyhow::Result<()> {
+        if self.mode == ImuMode::None || self.memory.is_empty() {
+            return Ok(());
+        }
+        // The gyroscope's terms are blind to a constant rotation, which the anchor absorbs;
+        // the accelerometer's need the positions of the latest frames held.
+        let held = if self.mode.accel() {
+            self.memory.len().min(self.imu_config.hold_frames)
+        } else {
+            0
+        };
+        let (hold_times, hold_targets): (Vec<f64>, Vec<Isometry3<f64>>) = self.memory
+            [self.memory.len() - held..]
+            .iter()
+            .copied()
+            .unzip();
+        let lr = self.lr();
+        let mut hold_out = PoseBatch::default();
+        let mut hold_cot = PoseBatch::default();
+        for _ in 0..self.imu_config.predict_steps {
+            self.grad.fill(0.0);
+            self.imu_loss(self.pixels, true)?;
+            self.net.backward(&self.times, &self.cot, &mut self.grad)?;
+            if held > 0 {
+                self.net.forward(&hold_times, Order::Pose, &mut hold_out)?;
+                hold_cot.reset(held, Order::Pose);
+                // An error of 1 cm costs one unit of the per-pixel tracking loss.
+                losses::pose_l2(
+                    &hold_out,
+                    &hold_targets,
+                    self.pixels,
+                    HOLD_METRES,
+                    &mut hold_cot,
+                );
+                self.net.backward(&hold_times, &hold_cot, &mut self.grad)?;
+            }
+            self.adam
+                .step_pose_field(self.net.as_mut(), &self.grad, &lr);
+        }
+        Ok(())
+    }
+
+    /// Re-fits the network on its memory, as [`cpose_slam::track::PoseNetTracker`] does.
+    fn refit(&mut self) -> anyhow::Result<()> {
+        // Earlier frames at random plus the latest `hold_frames`, whose slope the next
+        // frame's start extrapolates.
+        let n = self.memory.len();
+        let recent = self.imu_config.hold_frames.min(n);
+        let mut picks: Vec<usize> = (0..n - recent).collect();
+        let lr = self.lr();
+        for _ in 0..self.config.refit_steps {
+            picks.shuffle(&mut self.rng);
+            let chosen: Vec<usize> = picks
+                .iter()
+                .take(self.config.refit_batch)
+                .copied()
+                .chain(n - recent..n)
+                .collect();
+            let (times, targets): (Vec<f64>, Vec<Isometry3<f64>>) =
+                chosen.iter().map(|&j| self.memory[j]).unzip();
+            self.net.forward(&times, Order::Pose, &mut self.out)?;
+            self.cot.reset(times.len(), Order::Pose);
+            losses::pose_l2(&self.out, &targets, 1.0, 1.0, &mut self.cot);
+            self.grad.fill(0.0);
+            self.net.backward(&times, &self.cot, &mut self.grad)?;
+            self.refit_adam
+                .step_pose_field(self.net.as_mut(), &self.grad, &lr);
+        }
+        Ok(())
+    }
+}
+
+impl PoseModel for ImuPoseNet {
+    fn begin(
+        &mut self,
+        index: usize,
+        time: f64,
+        history: &[Isometry3<f64>],
+    ) -> anyhow::Result<Isometry3<f64>> {
+        self.rng = ChaCha8Rng::seed_from_u64(
+            (self.seed ^ 0x1A0_7AC4).wrapping_add((index as u64).wrapping_mul(0x9E37_79B9)),
+        );
+        if self.config.fresh_optimizer {
+            self.adam.reset();
+        }
+        if self.memory.is_empty() {
+            // Frame 0 at its given pose: the network's frame, where PN starts at the identity.
+            self.reference = history[0];
+            self.anchor_rotation = history[0].rotation;
+            self.anchor_translation = history[0].translation.vector;
+            let t0 = self.net.time_range().start_secs;
+            self.memory.push((t0, Isometry3::identity()));
+        }
+        let previous_time = self.memory.last().map_or(time, |m| m.0);
+        // The accelerometer fixes the velocity only over the held frames' span too.
+        let from = if self.mode.accel() {
+            let held = self.imu_config.hold_frames.min(self.memory.len());
+            self.memory[self.memory.len() - held].0
+        } else {
+            previous_time
+        };
+        self.gather(from, previous_time, time);
+        self.predict()?;
+        // T(t_{i−1}) = T_{i−1}: A_R = R_{i−1} R_PN(t_{i−1})⁻¹, a = p_{i−1} − R_0 p_PN(t_{i−1}).
+        self.net
+            .forward(&[previous_time], Order::Pose, &mut self.out)?;
+        let at_previous = self.out.world_from_body(0);
+        let previous = &history[index - 1];
+        self.anchor_rotation = previous.rotation * at_previous.rotation.inverse();
+        self.anchor_translation =
+            previous.translation.vector - self.reference.rotation * at_previous.translation.vector;
+        self.evaluate()?;
+        Ok(self.pose())
+    }
+
+    fn pose(&self) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            (self.reference.rotation * self.current.translation.vector + self.anchor_translation)
+                .into(),
+            self.anchor_rotation * self.current.rotation,
+        )
+    }
+
+    fn step(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()> {
+        self.grad.fill(0.0);
+        self.imu_loss(self.pixels, true)?;
+        // q = q_A ⊗ q_PN, t = R_0 p_PN + a: ∂L/∂q_PN = q_A* ⊗ ∂L/∂q, ∂L/∂p_PN = R_0ᵀ ∂L/∂t.
+        let last = self.times.len() - 1;
+        self.cot.rotation[last] += self.anchor_rotation.conjugate().into_inner() * grad_q;
+        self.cot.translation[last] += self.reference.rotation.inverse() * grad_t;
+        self.net.backward(&self.times, &self.cot, &mut self.grad)?;
+        if self.grad.iter().any(|g| !g.is_finite()) {
+            bail!("the PoseNet gradient is not finite while tracking");
+        }
+        let lr = self.lr();
+        self.adam
+            .step_pose_field(self.net.as_mut(), &self.grad, &lr);
+        self.evaluate()
+    }
+
+    fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        self.memory.push((time, self.reference.inverse() * pose));
+        self.refit()
+    }
+
+    fn save(&self, w: &mut Writer) {
+        w.f32s(&cpose_core::pose_field::params_to_vec(self.net.as_ref()));
+        for adam in [&self.adam, &self.refit_adam] {
+            let (m, v, t) = adam.state();
+            w.f32s(m);
+            w.f32s(v);
+            w.u64(t);
+        }
+        w.poses(&[self.reference]);
+        w.f64s(&self.memory.iter().map(|m| m.0).collect::<Vec<_>>());
+        w.poses(&self.memory.iter().map(|m| m.1).collect::<Vec<_>>());
+    }
+
+    fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        cpose_core::pose_field::params_from_slice(self.net.as_mut(), &r.f32s()?)?;
+        for adam in [&mut self.adam, &mut self.refit_adam] {
+            let (m, v, t) = (r.f32s()?, r.f32s()?, r.u64()?);
+            if !adam.set_state(&m, &v, t) {
+                bail!("the checkpoint's PoseNet optimiser does not match this network");
+            }
+        }
+        let reference = r.poses()?;
+        let (times, poses) = (r.f64s()?, r.poses()?);
+        if reference.len() != 1 || times.len() != poses.len() {
+            bail!("corrupt IMU PoseNet state in the checkpoint");
+        }
+        self.reference = reference[0];
+        self.memory = times.into_iter().zip(poses).collect();
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::euroc::EurocSequence;
+    use cpose_core::gravity_world;
+    use cpose_core::nn::Activation;
+    use cpose_core::pose_field::posenet::PoseNetConfig;
+
+    /// Frames at 5 Hz along the first `seconds` of the EuRoC excerpt's ground truth, and its
+    /// readings with the ground-truth bias removed.
+    fn flight(seconds: f64) -> Option<(Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>)> {
+        let dir = cpose_core::fs::shared_data_dir()?.join("euroc/V1_02_excerpt");
+        let seq = EurocSequence::load(&dir).ok()?;
+        let origin = seq.ground_truth[0].stamp;
+        let gt_times: Vec<f64> = seq
+            .ground_truth
+            .iter()
+            .map(|s| s.stamp.secs_since(origin))
+            .collect();
+        let at = |t: f64| {
+            let k = gt_times
+                .partition_point(|&x| x <= t)
+                .clamp(1, gt_times.len() - 1);
+            let s = (t - gt_times[k - 1]) / (gt_times[k] - gt_times[k - 1]);
+            seq.ground_truth[k - 1]
+                .world_from_body
+                .lerp_slerp(&seq.ground_truth[k].world_from_body, s.clamp(0.0, 1.0))
+        };
+        let times: Vec<f64> = (0..=(seconds * 5.0) as usize)
+            .map(|k| k as f64 / 5.0)
+            .collect();
+        let poses = times.iter().map(|&t| at(t)).collect();
+        let imu = seq
+            .imu
+            .iter()
+            .map(|s| {
+                let t = s.stamp.secs_since(origin);
+                let k = gt_times.partition_point(|&x| x < t).min(gt_times.len() - 1);
+                let state = &seq.ground_truth[k];
+                ImuSample {
+                    t_secs: t,
+                    gyro: seq.body_from_imu.rotation * (s.gyro - state.gyro_bias),
+                    accel: seq.body_from_imu.rotation * (s.accel - state.accel_bias),
+                }
+            })
+            .collect();
+        Some((times, poses, imu))
+    }
+
+    /// Mean rotation (degrees) and translation (metres) error of the start pose of every frame
+    /// when each earlier frame was tracked perfectly.
+    fn prediction_errors(
+        mode: ImuMode,
+        (times, poses, imu): &(Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>),
+    ) -> (f64, f64) {
+        let config = PoseNetTrackConfig {
+            network: PoseNetConfig {
+                activation: Activation::Softplus,
+                translation_scale: 5.0,
+                ..PoseNetTrackConfig::default().network
+            },
+            ..PoseNetTrackConfig::default()
+        };
+        let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
+        let mut model = ImuPoseNet::new(
+            &config,
+            &ImuTrackConfig::default(),
+            mode,
+            imu.clone(),
+            gravity_world(),
+            400,
+            range,
+            0,
+        )
+        .unwrap();
+        let (mut rot, mut trans) = (0.0, 0.0);
+        for i in 1..times.len() {
+            let start = model.begin(i, times[i], &poses[..i]).unwrap();
+            let err = start.inverse() * poses[i];
+            rot += err.rotation.angle().to_degrees();
+            trans += err.translation.vector.norm();
+            model.finish(i, times[i], &poses[i]).unwrap();
+        }
+        let n = (times.len() - 1) as f64;
+        (rot / n, trans / n)
+    }
+
+    /// The gyroscope carries the rotation from frame to frame at 5 Hz on the real flight far
+    /// better than PoseNet's own extrapolation.
+    #[test]
+    fn the_gyro_predicts_the_next_rotation_better_than_extrapolation() {
+        let Some(flight) = flight(10.0) else {
+            eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
+            return;
+        };
+        let none = prediction_errors(ImuMode::None, &flight);
+        for mode in [ImuMode::Loose, ImuMode::Tight, ImuMode::Accel] {
+            let e = prediction_errors(mode, &flight);
+            eprintln!(
+                "{mode:?}: {:.2}°, {:.3} m (none: {:.2}°, {:.3} m)",
+                e.0, e.1, none.0, none.1
+            );
+            // Measured: none 1.94°, loose 0.39°, tight 0.27°; accel 2.2° (it leaves the
+            // rotation to the images).
+            if mode.gyro() || mode == ImuMode::Loose {
+                assert!(e.0 < 0.3 * none.0, "{mode:?}: {e:?} vs none {none:?}");
+                // The gyroscope leaves the translation alone.
+                assert!(
+                    (e.1 - none.1).abs() < 1e-9,
+                    "{mode:?}: {e:?} vs none {none:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_resumed_tracker_continues_exactly() {
+        let Some((times, poses, imu)) = flight(2.0) else {
+            eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
+            return;
+        };
+        let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
+        let make = || {
+            ImuPoseNet::new(
+                &PoseNetTrackConfig::default(),
+                &ImuTrackConfig::default(),
+                ImuMode::Combined,
+                imu.clone(),
+                gravity_world(),
+                400,
+                range,
+                3,
+            )
+            .unwrap()
+        };
+        let (mut a, mut b) = (make(), make());
+        for i in 1..5 {
+            a.begin(i, times[i], &poses[..i]).unwrap();
+            a.finish(i, times[i], &poses[i]).unwrap();
+        }
+        let mut w = Writer::new();
+        a.save(&mut w);
+        let path =
+            std::env::temp_dir().join(format!("cpose-imu-tracker-{}.bin", std::process::id()));
+        w.save(&path).unwrap();
+        b.load(&mut Reader::open(&path).unwrap()).unwrap();
+        let _ = std::fs::remove_file(&path);
+        for i in 5..times.len() {
+            let pa = a.begin(i, times[i], &poses[..i]).unwrap();
+            let pb = b.begin(i, times[i], &poses[..i]).unwrap();
+            assert_eq!(pa, pb, "frame {i}");
+            a.step(
+                &Quaternion::new(0.1, 0.2, -0.1, 0.3),
+                &Vector3::new(0.5, -0.2, 0.1),
+            )
+            .unwrap();
+            b.step(
+                &Quaternion::new(0.1, 0.2, -0.1, 0.3),
+                &Vector3::new(0.5, -0.2, 0.1),
+            )
+            .unwrap();
+            assert_eq!(a.pose(), b.pose(), "frame {i}");
+            a.finish(i, times[i], &poses[i]).unwrap();
+            b.finish(i, times[i], &poses[i]).unwrap();
+        }
+    }
+}
