@@ -1,12 +1,13 @@
 //! NumPy `.npz` archives (a ZIP of `.npy` files, [`crate::zip`]) and event streams stored in
 //! them as EventNeRF does: four 1-D arrays `x`, `y`, `t`, `p` of equal length.
 //!
-//! Reading accepts every numeric dtype numpy writes for these columns ([`Dtype`](cpose_nerf::data::npy::Dtype)): integer or
-//! integral float pixels, integer or float times in a [`TimeUnit`], polarities coded `{−1, 1}`,
-//! `{0, 1}` or as booleans. The checks of [`crate::format`] apply (out-of-sensor events are
-//! dropped and counted, out-of-order times are errors). Writing produces `x, y` as `<u2`, `p` as
-//! `|i1` (±1, summed as-is by EventNeRF) and `t` as `<f8` seconds or `<i8` integers of a finer
-//! unit, in an archive of STORED entries that `np.load` reads.
+//! Reading accepts every numeric dtype numpy writes for these columns
+//! ([`Dtype`](cpose_nerf::data::npy::Dtype)): integer or integral float pixels, integer or float
+//! times in a [`TimeUnit`], polarities coded `{−1, 1}`, `{0, 1}` or as booleans. The checks of
+//! [`crate::format`] apply (out-of-sensor events are dropped and counted, out-of-order times are
+//! errors). Writing produces `x, y` as `<u2`, `p` as `|i1` (±1, summed as-is by EventNeRF) and
+//! `t` as `<f8` seconds or `<i8` integers of a finer unit, in an archive of STORED entries that
+//! `np.load` reads.
 
 use std::collections::BTreeMap;
 use std::path::Path;
