@@ -34,6 +34,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::npy::{Dtype, NpyArray, NpyError, NpyHeader, shape_str};
 use super::{DataError, Dataset, isometry_from_rt, load_same_size};
 use crate::camera::PinholeCamera;
 use crate::image::Image;
@@ -176,10 +177,10 @@ fn list_images(folder: &Path) -> Result<Vec<PathBuf>, DataError> {
     Ok(paths)
 }
 
-/// Reads a 2-D little-endian float64 NPY array with `cols` columns: format versions 1.0 (2-byte
-/// header length) and 2.0 / 3.0 (4-byte), header dict with `'descr': '<f8'`,
-/// `'fortran_order': False` and `'shape': (N, cols)`, `N ≥ 1`. Returns `N` and the row-major
-/// values. Anything else is a [`DataError::Format`] naming the file and what was expected.
+/// Reads a 2-D little-endian float64 NPY array with `cols` columns ([`NpyArray::parse`]:
+/// format versions 1.0 to 3.0) whose header has `'descr': '<f8'`, `'fortran_order': False` and
+/// `'shape': (N, cols)`, `N ≥ 1`. Returns `N` and the row-major values. Anything else is a
+/// [`DataError::Format`] naming the file and what was expected.
 pub fn read_npy_f64_matrix(path: &Path, cols: usize) -> Result<(usize, Vec<f64>), DataError> {
     let bytes = std::fs::read(path).map_err(|error| DataError::Io {
         path: path.to_path_buf(),
@@ -190,81 +191,26 @@ pub fn read_npy_f64_matrix(path: &Path, cols: usize) -> Result<(usize, Vec<f64>)
         expected: expected.to_owned(),
         found,
     };
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
-        return Err(bad(
-            "an NPY file (magic \\x93NUMPY)",
-            format!("{} bytes without that magic", bytes.len()),
-        ));
-    }
-    let (header_len, header_start) = match bytes[6] {
-        1 => (usize::from(u16::from_le_bytes([bytes[8], bytes[9]])), 10),
-        2 | 3 if bytes.len() >= 12 => (
-            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
-            12,
-        ),
-        v => {
-            return Err(bad(
-                "NPY format version 1, 2 or 3",
-                format!("version {v}.{}", bytes[7]),
-            ));
-        }
-    };
-    let data_start = header_start + header_len;
-    let header = bytes
-        .get(header_start..data_start)
-        .and_then(|h| std::str::from_utf8(h).ok())
-        .ok_or_else(|| {
-            bad(
-                "a complete text NPY header",
-                "a truncated header".to_owned(),
-            )
-        })?;
-    let descr = dict_value(header, "descr");
-    if !matches!(descr, Some("'<f8'" | "\"<f8\"")) {
+    let npy_err = |e: NpyError| bad(&e.expected, e.found);
+    // The header first, so that a wrong type or shape is reported rather than the data length.
+    let header = NpyHeader::parse(&bytes).map_err(npy_err)?;
+    if header.dtype != Dtype::F64 {
         return Err(bad(
             "'descr': '<f8' (little-endian float64)",
-            format!("header {}", header.trim()),
+            format!("'descr': '{}'", header.dtype),
         ));
     }
-    if dict_value(header, "fortran_order") != Some("False") {
-        return Err(bad(
-            "'fortran_order': False",
-            format!("header {}", header.trim()),
-        ));
-    }
-    let shape: Option<Vec<usize>> = dict_value(header, "shape").and_then(|s| {
-        s.strip_prefix('(')?
-            .strip_suffix(')')?
-            .split(',')
-            .map(str::trim)
-            .filter(|p| !p.is_empty())
-            .map(|p| p.parse().ok())
-            .collect()
-    });
-    let rows = match shape.as_deref() {
-        Some(&[rows, c]) if c == cols && rows >= 1 => rows,
+    let rows = match header.shape[..] {
+        [rows, c] if c == cols && rows >= 1 => rows,
         _ => {
             return Err(bad(
                 &format!("'shape': (N, {cols}) with N ≥ 1"),
-                match dict_value(header, "shape") {
-                    Some(shape) => format!("'shape': {shape}"),
-                    None => format!("header {}", header.trim()),
-                },
+                format!("'shape': {}", shape_str(&header.shape)),
             ));
         }
     };
-    let data = &bytes[data_start..];
-    if data.len() != 8 * rows * cols {
-        return Err(bad(
-            &format!("{} data bytes for shape ({rows}, {cols})", 8 * rows * cols),
-            format!("{} bytes", data.len()),
-        ));
-    }
-    let values = data
-        .chunks_exact(8)
-        .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
-        .collect();
-    Ok((rows, values))
+    let array = NpyArray::parse(&bytes).map_err(npy_err)?;
+    Ok((rows, array.to_f64_vec()))
 }
 
 /// Writes `values` (row-major, `values.len() / cols` rows) as a 2-D little-endian float64 NPY
@@ -279,54 +225,21 @@ pub fn write_npy_f64_matrix(path: &Path, cols: usize, values: &[f64]) -> std::io
         "{} values do not fill rows of {cols}",
         values.len()
     );
-    let dict = format!(
-        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {cols}), }}",
-        values.len() / cols
-    );
-    std::fs::write(path, npy_bytes(&dict, values))
+    let array = NpyArray::from_f64(values)
+        .reshaped(vec![values.len() / cols, cols])
+        .expect("cols divides the number of values");
+    std::fs::write(path, array.to_bytes())
 }
 
-/// An NPY 1.0 file: magic, version, header length, the header dict padded with spaces and a
-/// newline so that the data starts at a multiple of 64 bytes, then `values` little-endian.
+/// An NPY 1.0 file with the header dict `dict` (any text, for tests of bad headers), then
+/// `values` little-endian.
+#[cfg(test)]
 fn npy_bytes(dict: &str, values: &[f64]) -> Vec<u8> {
-    let mut header = dict.to_owned();
-    while !(10 + header.len() + 1).is_multiple_of(64) {
-        header.push(' ');
-    }
-    header.push('\n');
-    let header_len = u16::try_from(header.len()).expect("an NPY dict of a 2-D shape is short");
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&header_len.to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
+    let mut bytes = super::npy::npy_header_bytes(dict);
     for v in values {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
     bytes
-}
-
-/// The raw text of `key`'s value in a Python dict literal such as
-/// `{'descr': '<f8', 'fortran_order': False, 'shape': (20, 17), }`: up to the next top-level
-/// comma (commas inside parentheses belong to the value), trimmed.
-fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
-    let start = ["'", "\""].iter().find_map(|q| {
-        header
-            .find(&format!("{q}{key}{q}"))
-            .map(|i| i + key.len() + 2)
-    })?;
-    let rest = header[start..].trim_start().strip_prefix(':')?;
-    let mut depth = 0i32;
-    let end = rest
-        .char_indices()
-        .find(|&(_, ch)| {
-            match ch {
-                '(' => depth += 1,
-                ')' => depth -= 1,
-                _ => {}
-            }
-            (ch == ',' && depth == 0) || ch == '}'
-        })
-        .map_or(rest.len(), |(i, _)| i);
-    Some(rest[..end].trim())
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! Real multi-view datasets for the `nerf` task: LLFF forward-facing scenes ([`llff`]) and the
-//! Blender / NeRF-synthetic format ([`blender`]), loaded into one small [`Dataset`] type.
+//! Blender / NeRF-synthetic format ([`blender`]), loaded into one small [`Dataset`] type; NumPy
+//! `.npy` arrays ([`npy`]) for them and for the event readers above this crate.
 //!
 //! # Conventions (see CONVENTIONS.md)
 //!
@@ -19,6 +20,7 @@ use crate::image::{Image, ImageError};
 
 pub mod blender;
 pub mod llff;
+pub mod npy;
 
 /// Images with their poses and one shared camera. All vectors have one entry per image, in the
 /// reader's order; all images have the size `camera.width × camera.height`.
@@ -148,12 +150,12 @@ fn load_same_size(
 
 /// The largest `|RᵀR − I|` entry and `|det R − 1|` accepted for a rotation read from a file
 /// (file values are rounded; COLMAP/Blender store near-orthonormal matrices).
-const ROTATION_TOLERANCE: f64 = 1e-4;
+pub const ROTATION_TOLERANCE: f64 = 1e-4;
 
 /// The isometry `[R | t]` from a near-orthonormal rotation read from `path`; errors when `R` is
 /// not a rotation within [`ROTATION_TOLERANCE`] (or has non-finite entries). The quaternion of
 /// `R` (Shepperd's method) is normalised, which absorbs the file's rounding.
-fn isometry_from_rt(
+pub fn isometry_from_rt(
     rotation: Matrix3<f64>,
     translation: Vector3<f64>,
     path: &Path,
