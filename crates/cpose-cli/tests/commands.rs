@@ -596,3 +596,100 @@ fn slam_without_ground_truth_writes_the_trajectory_and_no_ate() {
     let log = std::fs::read_to_string(out_dir.join("log.txt")).unwrap();
     assert!(log.contains("no ground truth"), "{log}");
 }
+
+/// `slam_imu` runs end to end on both its data sources at toy sizes: the synthetic room with
+/// the simulated IMU (the paper's ScanNet protocol) and the room along the real EuRoC flight
+/// with its real IMU. A EuRoC folder without `sensor.yaml` is one clear error.
+#[test]
+fn slam_imu_runs_on_simulated_and_real_imu() {
+    let small = [
+        "synthetic.width=48",
+        "tracking.edge=2",
+        "tracking.pixels=64",
+        "tracking.iterations=5",
+        "mapping.pixels=128",
+        "mapping.first_iterations=20",
+        "mapping.iterations=5",
+        "imu.predict_steps=3",
+        "mesh.voxel=0",
+    ];
+    let cases = [
+        (
+            "configs/synthetic_imu.toml",
+            "imu-synthetic",
+            vec![
+                "synthetic.frames=31",
+                "slam.methods=[\"baseline\", \"tight\", \"combined\"]",
+            ],
+            vec!["baseline", "tight", "combined"],
+        ),
+        (
+            "configs/euroc_v102_imu.toml",
+            "imu-euroc",
+            vec!["synthetic.frames=6", "slam.methods=[\"loose\", \"accel\"]"],
+            vec!["loose", "accel"],
+        ),
+    ];
+    for (config, name, sets, keys) in cases {
+        let data = temp_dir(&format!("{name}-data"));
+        let out_dir = temp_dir(name);
+        let data_path = format!("data.path={}", data.display());
+        let mut args = vec![
+            "run",
+            config,
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--force",
+            "-q",
+        ];
+        for s in small.iter().chain(&sets).chain([&data_path.as_str()]) {
+            args.extend(["--set", s]);
+        }
+        let out = cpose_in(&workspace_root(), &args);
+        assert!(
+            out.status.success(),
+            "{config}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let metrics: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap())
+                .unwrap();
+        for key in keys {
+            let ate = metrics[key]["ate_rmse_cm"].as_f64();
+            assert!(ate.is_some_and(f64::is_finite), "{config} {key}: {metrics}");
+            assert!(out_dir.join(format!("traj_{key}.txt")).is_file());
+        }
+        if name == "imu-euroc" {
+            let log = std::fs::read_to_string(out_dir.join("log.txt")).unwrap();
+            assert!(log.contains("clear of every surface"), "{log}");
+        }
+    }
+    // A EuRoC folder whose sensor.yaml is missing.
+    let broken = temp_dir("imu-euroc-broken");
+    let source = workspace_root().join("../shared/data/euroc/V1_02_excerpt/mav0");
+    for file in ["imu0/data.csv", "state_groundtruth_estimate0/data.csv"] {
+        let to = broken.join("mav0").join(file);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(source.join(file), &to).unwrap();
+    }
+    let out_dir = temp_dir("imu-euroc-broken-run");
+    let euroc = format!("euroc.path={}", broken.display());
+    let out = cpose_in(
+        &workspace_root(),
+        &[
+            "run",
+            "configs/euroc_v102_imu.toml",
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--force",
+            "-q",
+            "--set",
+            &euroc,
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    assert!(err.contains("imu0/sensor.yaml"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

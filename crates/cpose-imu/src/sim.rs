@@ -97,7 +97,8 @@ pub fn imu_from_poses(
     seed: u64,
 ) -> Option<SimulatedImu> {
     let n = times.len();
-    if n < 2 || poses.len() != n || !(rate_hz > 0.0) || times.windows(2).any(|w| w[1] <= w[0]) {
+    let increasing = times.windows(2).all(|w| w[1] > w[0]);
+    if n < 2 || poses.len() != n || !rate_hz.is_finite() || rate_hz <= 0.0 || !increasing {
         return None;
     }
     let positions: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();

@@ -237,6 +237,17 @@ impl ImuPoseNet {
         Ok(loss)
     }
 
+    /// Anchors the network at the previous frame, `T(t_{i−1}) = T_{i−1}`:
+    /// `A_R = R_{i−1} R_PN(t_{i−1})⁻¹` and `a = p_{i−1} − R_0 p_PN(t_{i−1})`.
+    fn anchor_at(&mut self, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        self.net.forward(&[time], Order::Pose, &mut self.out)?;
+        let network = self.out.world_from_body(0);
+        self.anchor_rotation = pose.rotation * network.rotation.inverse();
+        self.anchor_translation =
+            pose.translation.vector - self.reference.rotation * network.translation.vector;
+        Ok(())
+    }
+
     /// The network at `t_i`, `PN(t_i)`.
     fn evaluate(&mut self) -> anyhow::Result<()> {
         let t = *self.times.last().expect("gather() pushes t_i");
@@ -334,8 +345,6 @@ impl PoseModel for ImuPoseNet {
         if self.memory.is_empty() {
             // Frame 0 at its given pose: the network's frame, where PN starts at the identity.
             self.reference = history[0];
-            self.anchor_rotation = history[0].rotation;
-            self.anchor_translation = history[0].translation.vector;
             let t0 = self.net.time_range().start_secs;
             self.memory.push((t0, Isometry3::identity()));
         }
@@ -348,15 +357,10 @@ impl PoseModel for ImuPoseNet {
             previous_time
         };
         self.gather(from, previous_time, time);
+        let previous = history[index - 1];
+        self.anchor_at(previous_time, &previous)?;
         self.predict()?;
-        // T(t_{i−1}) = T_{i−1}: A_R = R_{i−1} R_PN(t_{i−1})⁻¹, a = p_{i−1} − R_0 p_PN(t_{i−1}).
-        self.net
-            .forward(&[previous_time], Order::Pose, &mut self.out)?;
-        let at_previous = self.out.world_from_body(0);
-        let previous = &history[index - 1];
-        self.anchor_rotation = previous.rotation * at_previous.rotation.inverse();
-        self.anchor_translation =
-            previous.translation.vector - self.reference.rotation * at_previous.translation.vector;
+        self.anchor_at(previous_time, &previous)?;
         self.evaluate()?;
         Ok(self.pose())
     }
@@ -431,9 +435,12 @@ mod tests {
     use cpose_core::nn::Activation;
     use cpose_core::pose_field::posenet::PoseNetConfig;
 
+    /// Frame times, body poses and IMU readings.
+    type Flight = (Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>);
+
     /// Frames at 5 Hz along the first `seconds` of the EuRoC excerpt's ground truth, and its
     /// readings with the ground-truth bias removed.
-    fn flight(seconds: f64) -> Option<(Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>)> {
+    fn flight(seconds: f64) -> Option<Flight> {
         let dir = cpose_core::fs::shared_data_dir()?.join("euroc/V1_02_excerpt");
         let seq = EurocSequence::load(&dir).ok()?;
         let origin = seq.ground_truth[0].stamp;
@@ -474,10 +481,7 @@ mod tests {
 
     /// Mean rotation (degrees) and translation (metres) error of the start pose of every frame
     /// when each earlier frame was tracked perfectly.
-    fn prediction_errors(
-        mode: ImuMode,
-        (times, poses, imu): &(Vec<f64>, Vec<Isometry3<f64>>, Vec<ImuSample>),
-    ) -> (f64, f64) {
+    fn prediction_errors(mode: ImuMode, (times, poses, imu): &Flight) -> (f64, f64) {
         let config = PoseNetTrackConfig {
             network: PoseNetConfig {
                 activation: Activation::Softplus,

@@ -623,13 +623,13 @@ pub fn run_methods(
                 None
             }
         };
-        save_view(&mut slam, &seq, n - 1, input, key)?;
+        save_view(&mut slam, seq, n - 1, input, key)?;
         let mut surface = None;
         if let Some((grid, level, margin)) = &setup.mesh {
             let mesh = slam.mesh(grid, *level, *margin);
             let path = input.run_dir.file(format!("mesh_{}.ply", key));
             mesh.write_ply(&path)?;
-            surface = score_mesh(&mesh, &seq, truth, n)?;
+            surface = score_mesh(&mesh, seq, truth, n)?;
             input.run_dir.log(format_args!(
                 "{}: mesh of {} triangles ({:.1} m²) in {}{}",
                 key,

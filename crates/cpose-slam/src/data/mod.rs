@@ -258,7 +258,7 @@ impl RgbdSequence {
     /// the scene; `stride ≤ 1` keeps all.
     pub fn every(mut self, stride: usize) -> Self {
         if stride > 1 {
-            let keep = |i: &usize| i % stride == 0;
+            let keep = |i: &usize| i.is_multiple_of(stride);
             self.frames = self
                 .frames
                 .into_iter()
