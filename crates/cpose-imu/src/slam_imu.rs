@@ -22,8 +22,8 @@ use cpose_slam::map::MapConfig;
 use cpose_slam::slam::{MappingConfig, TrackingConfig};
 use cpose_slam::synth::{RoomConfig, fit_in_room, render_room};
 use cpose_slam::task::{
-    BoundsConfig, DataConfig, MeshConfig, ModelFactory, SlamSetup, ensure_generated, frame_range,
-    open_sequence, run_methods,
+    BoundsConfig, DataConfig, MeshConfig, ModelFactory, SlamConfig, SlamSetup, ensure_generated,
+    frame_range, open_sequence, run_methods,
 };
 use cpose_slam::track::{FreePose, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference};
 use nalgebra::{Isometry3, Vector3};
@@ -65,7 +65,7 @@ struct Experiment {
     posenet: PoseNetTrackConfig,
     #[serde(default)]
     mesh: MeshConfig,
-    slam: SlamConfig,
+    slam: SlamConfig<Method>,
 }
 
 /// The room along a real EuRoC flight with its real IMU.
@@ -123,19 +123,6 @@ const ADIS16448: NoiseModel = NoiseModel {
     initial_gyro_bias: Vector3::new(0.0, 0.0, 0.0),
     initial_accel_bias: Vector3::new(0.0, 0.0, 0.0),
 };
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SlamConfig {
-    methods: Vec<Method>,
-    /// Write a checkpoint every this many frames (0: never).
-    #[serde(default = "fifty")]
-    checkpoint_every: usize,
-}
-
-fn fifty() -> usize {
-    50
-}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]

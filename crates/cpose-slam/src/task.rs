@@ -61,7 +61,7 @@ struct Experiment {
     intrinsic: IntrinsicConfig,
     #[serde(default)]
     mesh: MeshConfig,
-    slam: SlamConfig,
+    slam: SlamConfig<Method>,
 }
 
 /// The map's surface, written as `mesh_<method>.ply` after each method; `[mesh]` in a config.
@@ -204,14 +204,16 @@ impl BoundsConfig {
     }
 }
 
+/// `[slam]`: the tracking methods to run, one after the other, and the checkpoint interval.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SlamConfig {
-    methods: Vec<Method>,
+pub struct SlamConfig<M> {
+    /// The methods, by name.
+    pub methods: Vec<M>,
     /// Write a checkpoint every this many frames (0: never); `cpose run --resume` continues
     /// from it.
     #[serde(default = "fifty")]
-    checkpoint_every: usize,
+    pub checkpoint_every: usize,
 }
 
 fn fifty() -> usize {
