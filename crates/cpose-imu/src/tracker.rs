@@ -4,21 +4,25 @@
 //!
 //! PoseNet gives the body's motion as one function of time in the frame of the first body pose,
 //! `PN(t) ≈ T_0⁻¹ T(t)`, so the IMU relations hold everywhere: `q̇ = ½ q ⊗ (0, ω)` and
-//! `f = Rᵀ (p̈ − g_PN)` with gravity `g_PN` in the network's frame. A frame is placed relative to
-//! the previous one, as the paper's default reference: `T_i = A ∘ PN(t_i)` with the anchor
-//! `A = T_{i−1} ∘ PN(t_{i−1})⁻¹` taken when the frame starts, so only the network's motion since
-//! the previous frame counts (its drift from the earlier estimates does not).
+//! `f = Rᵀ (p̈ − g)`. A frame is placed relative to the previous one, as the paper's default
+//! reference: `T(t) = (A_R R_PN(t), R_0 p_PN(t) + a)`, with `A_R` and `a` taken so that
+//! `T(t_{i−1}) = T_{i−1}`. Only the network's motion since the previous frame counts, not its
+//! drift from the earlier estimates. Rotation and translation are anchored apart, so a
+//! rotation the gyroscope terms leave free (they are blind to a constant factor) does not turn
+//! the translation.
 //!
 //! Per frame `i`, with the readings in `(t_{i−1}, t_i]`:
-//! 1. **Prediction** (`imu.predict_steps`): Adam on the IMU loss while the poses of the last
-//!    `imu.hold_frames` frames hold the network in place — the IMU carries the pose forward
-//!    from the previous frame (without IMU the start is the network's own extrapolation).
+//! 1. **Prediction** (`imu.predict_steps`): Adam on the IMU loss alone — the IMU carries the
+//!    pose forward from the previous frame (without IMU, the start is the network's own
+//!    extrapolation). The accelerometer's terms also cover the `imu.hold_frames` latest frames,
+//!    whose positions hold the network, so that the velocity is defined.
 //! 2. **Tracking**: every step adds the IMU loss to the tracking loss, `L_track/P + λ_g L_gyro +
 //!    λ_a L_acc` (per pixel, `P = tracking.pixels`; the paper's weights are 1 and 1).
 //! 3. **Memory**: the chosen pose is kept and PoseNet re-fitted on the list, as without IMU.
 //!
 //! Gyroscope losses: loose (the rotation integrated from `t_{i−1}` to `t_i`), tight (`q̇` at
-//! every reading); the accelerometer through `p̈` ([`crate::losses`]).
+//! every reading); the accelerometer through `p̈` with the rotation taken as given
+//! ([`crate::losses`]).
 
 use anyhow::bail;
 use cpose_core::nn::Adam;
@@ -48,7 +52,8 @@ pub struct ImuTrackConfig {
     pub accel_weight: f64,
     /// Adam steps on the IMU loss alone before a frame is tracked (0: none).
     pub predict_steps: usize,
-    /// The latest frames whose poses hold the network during prediction.
+    /// The latest frames: their positions hold the network while the accelerometer predicts,
+    /// and every re-fit includes them (their slope is what the next start extrapolates).
     pub hold_frames: usize,
     /// At most this many readings per step, evenly spread over the interval.
     pub max_readings: usize,
