@@ -33,6 +33,7 @@ fn list_prints_tasks_then_pose_fields() {
             "nerf",
             "planar",
             "slam",
+            "slam_imu",
             "synth_room",
             "trajectory",
             "composed",
