@@ -177,6 +177,7 @@ fn every_config_runs_as_a_smoke_test() {
             vec!["run".into(), config.to_str().unwrap().into(), "-q".into()];
         for (marker, key, relative) in [
             ("source = \"euroc\"", "data.path", "euroc/V1_02_excerpt"),
+            ("[euroc]", "euroc.path", "euroc/V1_02_excerpt"),
             ("planar/cat.jpg", "image.path", "planar/cat.jpg"),
             ("source = \"llff\"", "data.path", "llff/fern"),
         ] {
@@ -248,6 +249,21 @@ fn every_config_runs_as_a_smoke_test() {
                 );
             }
             continue;
+        }
+        if text.contains("task = \"slam_imu\"") {
+            let data_dir = temp_dir("smoke-slam-imu");
+            for set in [
+                "synthetic.frames=12".to_string(),
+                "synthetic.width=48".to_string(),
+                "tracking.edge=2".to_string(),
+                "tracking.pixels=32".to_string(),
+                "mapping.pixels=64".to_string(),
+                "imu.predict_steps=2".to_string(),
+                "mesh.voxel=0".to_string(),
+                format!("data.path={}", data_dir.display()),
+            ] {
+                args.extend(["--set".into(), set]);
+            }
         }
         if text.contains("task = \"synth_room\"") {
             let data_dir = temp_dir("smoke-room");
