@@ -30,6 +30,7 @@ fn list_prints_tasks_then_pose_fields() {
     assert_eq!(
         names,
         [
+            "events",
             "nerf",
             "planar",
             "slam",

@@ -265,6 +265,21 @@ fn every_config_runs_as_a_smoke_test() {
                 args.extend(["--set".into(), set]);
             }
         }
+        if text.contains("task = \"events\"") {
+            // A 24 × 18 sensor over 40 renders, small batches.
+            for set in [
+                "simulation.width=24",
+                "simulation.height=18",
+                "simulation.render_steps=40",
+                "simulation.held_out_views=1",
+                "train.rays_per_step=64",
+                "train.windows_per_step=2",
+                "render.samples=12",
+                "eval.pose_samples=10",
+            ] {
+                args.extend(["--set".into(), set.into()]);
+            }
+        }
         if text.contains("task = \"synth_room\"") {
             let data_dir = temp_dir("smoke-room");
             for set in [

@@ -18,13 +18,17 @@
 
 pub use cpose_nerf;
 
+pub mod colour;
 mod error;
 pub mod eventnerf;
 pub mod format;
+pub mod loss;
 pub mod npz;
 pub mod simulate;
 pub mod stream;
+mod task;
 pub mod text;
+pub mod train;
 pub mod turntable;
 pub mod zip;
 

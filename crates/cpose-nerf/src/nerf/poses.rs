@@ -87,6 +87,19 @@ impl FramePoses {
         self.correction.is_some()
     }
 
+    /// Replaces the frames — their initial poses and times — keeping the correction and its
+    /// optimiser state: for poses queried at new times every step (event windows). Reuses the
+    /// buffers.
+    pub fn set_frames(&mut self, init: &[Isometry3<f64>], times: &[f64]) {
+        assert_eq!(init.len(), times.len(), "one initial pose per frame time");
+        self.init.clear();
+        self.init.extend_from_slice(init);
+        self.times.clear();
+        self.times.extend_from_slice(times);
+        self.current.clear();
+        self.current.extend_from_slice(init);
+    }
+
     /// The frame times.
     pub fn times(&self) -> &[f64] {
         &self.times

@@ -174,6 +174,35 @@ impl<S: Real> Renderer<S> {
             Some(rng) => settings.sampling.jittered_depths(rng, k, depths),
             None => settings.sampling.midpoint_depths(k, depths),
         }
+        self.place_samples(settings, rays);
+        self.shade(field, settings, n)
+    }
+
+    /// Renders `rays` with the caller's stratum offsets `u ∈ [0, 1)` (`rays × samples`, as
+    /// [`Sampling::jittered_depths`] draws them): e.g. the same offsets for two rays whose
+    /// renders are compared (EventNeRF's two window ends).
+    pub fn forward_with_offsets(
+        &mut self,
+        field: &mut dyn RadianceField<S>,
+        settings: &RenderSettings,
+        rays: &[CameraRay],
+        offsets: &[f64],
+    ) -> &[Composited<S>] {
+        let (n, k) = (rays.len(), settings.samples);
+        assert_eq!(offsets.len(), n * k, "rays × samples offsets");
+        let depths = grow(&mut self.depths, n * k);
+        for (d, (i, u)) in depths.iter_mut().zip(offsets.iter().enumerate()) {
+            *d = S::from_f64(settings.sampling.depth_at(((i % k) as f64 + u) / k as f64));
+        }
+        self.place_samples(settings, rays);
+        self.shade(field, settings, n)
+    }
+
+    /// Maps the depths of `[near, far]` onto each ray's chord through the clip sphere (if any)
+    /// and places the sample points.
+    fn place_samples(&mut self, settings: &RenderSettings, rays: &[CameraRay]) {
+        let (n, k) = (rays.len(), settings.samples);
+        let depths = &mut self.depths[..n * k];
         let points = grow(&mut self.points, 3 * n * k);
         let norms = grow(&mut self.norms, n);
         let clip = settings.metric_clip();
@@ -202,7 +231,6 @@ impl<S: Real> Renderer<S> {
                     }
                 }
             });
-        self.shade(field, settings, n)
     }
 
     /// Renders `rays` at the caller's sample depths `depths` (`rays × settings.samples`, each
@@ -533,6 +561,51 @@ mod tests {
             .map(|p| p.iter().map(|v| v * v).sum::<f64>() <= 1.0)
             .collect();
         assert!(inside[..15].iter().all(|&i| i) && !inside[15], "{inside:?}");
+    }
+
+    /// Offsets drawn from a seed render exactly as `forward` with that seed, and a ray repeated
+    /// with its offsets repeated renders the same twice.
+    #[test]
+    fn caller_offsets_render_as_the_drawn_jitter() {
+        let mut field = field();
+        let settings = RenderSettings {
+            last_interval: LastInterval::Closed,
+            samples: 8,
+            sampling: Sampling::Metric {
+                near: 2.0,
+                far: 6.0,
+            },
+            background: Some([1.0; 3]),
+            clip: Some(Clip {
+                centre: [0.0; 3],
+                radius: 1.5,
+            }),
+        };
+        let pose = Isometry3::translation(0.1, 0.0, -4.0);
+        let rays = [
+            CameraRay::new(0, &pose, [0.05, -0.1, 1.0]),
+            CameraRay::new(0, &pose, [-0.2, 0.1, 1.0]),
+        ];
+        let mut renderer = Renderer::<f64>::default();
+        let drawn = renderer
+            .forward(
+                &mut field,
+                &settings,
+                &rays,
+                Some(&mut ChaCha8Rng::seed_from_u64(4)),
+            )
+            .to_vec();
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let offsets: Vec<f64> = (0..16).map(|_| rng.random()).collect();
+        let given = renderer
+            .forward_with_offsets(&mut field, &settings, &rays, &offsets)
+            .to_vec();
+        assert_eq!(drawn, given);
+        let pair = [rays[1], rays[1]];
+        let twice = [&offsets[8..], &offsets[8..]].concat();
+        let out = renderer.forward_with_offsets(&mut field, &settings, &pair, &twice);
+        assert_eq!(out[0], given[1]);
+        assert_eq!(out[1], given[1]);
     }
 
     /// `Σ_r a_r·C_r + b_r D_r + c_r A_r` of the rays through `pixels` of a camera at `pose`, and

@@ -200,35 +200,10 @@ impl<'a> Trainer<'a> {
     }
 
     /// Writes the field's and the pose correction's parameters after `iterations` steps to
-    /// `path` (atomically, so the previous checkpoint survives a crash): the ASCII line
-    /// `cpose-nerf checkpoint v1 <iterations> <field params> <pose params>\n`, then both
-    /// parameter vectors as little-endian `f32`.
-    ///
-    /// Errors without writing if a parameter is not finite (a diverged run), so that `path`
-    /// keeps the last good checkpoint ([`Trainer::last_checkpoint`]).
+    /// `path` ([`write_checkpoint`]; a diverged state does not overwrite the last good
+    /// checkpoint, [`Trainer::last_checkpoint`]).
     pub fn save_checkpoint(&mut self, path: &Path, iterations: u64) -> anyhow::Result<()> {
-        let field = self.field.params();
-        let pose = self.poses.params();
-        let bad_field = field.iter().filter(|v| !v.is_finite()).count();
-        let bad_pose = pose.iter().filter(|v| !v.is_finite()).count();
-        if bad_field + bad_pose > 0 {
-            bail!(
-                "after {iterations} steps {bad_field} field and {bad_pose} pose parameters are not finite; not overwriting the checkpoint {}",
-                path.display()
-            );
-        }
-        let mut bytes = format!(
-            "cpose-nerf checkpoint v1 {iterations} {} {}\n",
-            field.len(),
-            pose.len()
-        )
-        .into_bytes();
-        bytes.reserve(4 * (field.len() + pose.len()));
-        for v in field.iter().chain(&pose) {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-        cpose_core::fs::write_atomic(path, bytes)
-            .with_context(|| format!("cannot write the checkpoint {}", path.display()))?;
+        write_checkpoint(path, iterations, self.field.params(), &self.poses.params())?;
         self.last_checkpoint = Some((path.to_path_buf(), iterations));
         Ok(())
     }
@@ -239,6 +214,39 @@ impl<'a> Trainer<'a> {
             .as_ref()
             .map(|(path, iterations)| (path.as_path(), *iterations))
     }
+}
+
+/// Writes a field's and a pose correction's parameters after `iterations` steps to `path`
+/// (atomically, so the previous checkpoint survives a crash): the ASCII line
+/// `cpose-nerf checkpoint v1 <iterations> <field params> <pose params>\n`, then both parameter
+/// vectors as little-endian `f32`. Errors without writing if a parameter is not finite (a
+/// diverged run), so that `path` keeps the last good checkpoint.
+pub fn write_checkpoint(
+    path: &Path,
+    iterations: u64,
+    field: &[f32],
+    pose: &[f32],
+) -> anyhow::Result<()> {
+    let bad_field = field.iter().filter(|v| !v.is_finite()).count();
+    let bad_pose = pose.iter().filter(|v| !v.is_finite()).count();
+    if bad_field + bad_pose > 0 {
+        bail!(
+            "after {iterations} steps {bad_field} field and {bad_pose} pose parameters are not finite; not overwriting the checkpoint {}",
+            path.display()
+        );
+    }
+    let mut bytes = format!(
+        "cpose-nerf checkpoint v1 {iterations} {} {}\n",
+        field.len(),
+        pose.len()
+    )
+    .into_bytes();
+    bytes.reserve(4 * (field.len() + pose.len()));
+    for v in field.iter().chain(pose) {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    cpose_core::fs::write_atomic(path, bytes)
+        .with_context(|| format!("cannot write the checkpoint {}", path.display()))
 }
 
 /// `k` distinct entries of `permutation` drawn uniformly at random, in random order: a partial

@@ -1,0 +1,905 @@
+//! Task `events`: NeRF from colour events with a pose at every window end (paper §4.2, its
+//! interpolation table and calibration figures).
+//!
+//! The scene is learnt from events alone with EventNeRF's loss ([`crate::train`]); the methods
+//! differ only in the poses at the window ends, `C(τ) ∘ init(τ)`:
+//! - `eventnerf`: `init` as it is (EventNeRF, poses fixed);
+//! - `posenet`: `C` is PoseNet on time, learnt jointly with the scene (held at the known views
+//!   by the anchor when there are some);
+//! - `true_poses`: the ground truth (the reference).
+//!
+//! Experiments (`[experiment] kind`):
+//! - `interpolation`: only `K` views of the revolution are known, at `i T / K` (`i = 0…K`, the
+//!   last closing the revolution); `init` interpolates them (slerp and a straight line), which
+//!   cuts the circle's chords. One condition per `known_poses` entry.
+//! - `calibration` (synthetic data): `init` is the turntable about the nominal axis while the
+//!   data turned about an axis tilted by each of `axis_offsets_deg`.
+//!
+//! Data (`[data] source`): `synthetic` simulates the built-in scene on a turntable
+//! ([`crate::simulate`], `[simulation]`); `eventnerf` reads a scene folder by path, whose views
+//! are the truth (interpolated between them).
+//!
+//! Pose errors are measured at `eval.pose_samples` times spread over the recording: mean
+//! rotation (°) and translation (scene units) error against the truth, as they are (anchored
+//! or nominal paths fix the frame) and, for calibration, also after BARF's Procrustes
+//! alignment. Held-out views are rendered at the true poses (mapped by that alignment) and
+//! scored with PSNR and SSIM after EventNeRF's colour correction ([`ColourCorrection`]).
+//!
+//! Outputs: `metrics.json` (`{condition: {method: {…}}}`), `traj_gt.txt` and
+//! `traj_<condition>_<method>.txt` (TUM, at the evaluation times), `trajectory_<condition>_<method>.png`,
+//! `view_<k>_<condition>_<method>.png` (corrected render | truth), `depth_<k>_…png`,
+//! `own_view_<condition>_<method>.png` (the first held-out view from the method's own camera
+//! at that time | truth),
+//! `checkpoint_<condition>_<method>.bin`.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
+use cpose_core::nn::ExponentialDecay;
+use cpose_core::registry::{Task, TaskInput};
+use cpose_core::{PoseField, PoseNetConfig, TimeRange};
+use cpose_nerf::camera::PinholeCamera;
+use cpose_nerf::field3d::{RadianceFieldConfig, SceneBounds};
+use cpose_nerf::image::{Image, psnr};
+use cpose_nerf::metrics::ssim;
+use cpose_nerf::nerf::eval::{depth_image, trajectory_plot};
+use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
+use cpose_nerf::nerf::render::{Clip, RenderSettings, Renderer, render_view};
+use cpose_nerf::scene::SyntheticScene;
+use cpose_nerf::volume::{LastInterval, Sampling};
+use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+
+use crate::colour::ColourCorrection;
+use crate::eventnerf::{EventNerfOptions, EventNerfScene, read_eventnerf};
+use crate::loss::EventLoss;
+use crate::simulate::{SimulatorConfig, SyntheticEventsConfig, simulate_eventnerf_scene};
+use crate::train::{EventSchedule, EventTrainer, InitialPath, KeyedPoses};
+use crate::turntable::Turntable;
+
+inventory::submit! {
+    Task {
+        name: "events",
+        about: "NeRF from colour events (paper §4.2): PoseNet vs interpolated or mis-calibrated poses",
+        run,
+    }
+}
+
+/// The config file of the task.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Experiment {
+    #[serde(default)]
+    data: DataConfig,
+    #[serde(default)]
+    simulation: SimulationConfig,
+    #[serde(default)]
+    experiment: ExperimentConfig,
+    #[serde(default)]
+    train: TrainConfig,
+    #[serde(default)]
+    render: RenderConfig,
+    #[serde(default)]
+    eval: EvalConfig,
+    /// The radiance field, `kind = "grid"` or `"mlp"`.
+    #[serde(rename = "field")]
+    _field: Option<serde::de::IgnoredAny>,
+    /// PoseNet's settings ([`PoseNetConfig`]).
+    #[serde(rename = "posenet")]
+    _posenet: Option<serde::de::IgnoredAny>,
+}
+
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+enum Source {
+    #[default]
+    Synthetic,
+    Eventnerf,
+}
+
+/// `[data]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct DataConfig {
+    source: Source,
+    /// EventNeRF scene folder (with `train/` and optionally `validation/`).
+    path: Option<PathBuf>,
+    /// The split with the events.
+    split: String,
+}
+
+impl Default for DataConfig {
+    fn default() -> Self {
+        Self {
+            source: Source::Synthetic,
+            path: None,
+            split: "train".to_owned(),
+        }
+    }
+}
+
+/// `[simulation]`: the synthetic recording.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct SimulationConfig {
+    width: usize,
+    height: usize,
+    fov_x_deg: f64,
+    /// Turntable: camera distance from the axis, height, seconds per revolution.
+    radius: f64,
+    camera_height: f64,
+    duration_secs: f64,
+    /// Renders over the revolution (events interpolated in between).
+    render_steps: usize,
+    supersample: usize,
+    held_out_views: usize,
+    threshold: f64,
+    threshold_sigma: f64,
+    refractory_secs: f64,
+    eps: f64,
+}
+
+impl Default for SimulationConfig {
+    fn default() -> Self {
+        let s = SyntheticEventsConfig::default();
+        Self {
+            width: s.camera.width,
+            height: s.camera.height,
+            fov_x_deg: 50.0,
+            radius: s.turntable.radius,
+            camera_height: s.turntable.height,
+            duration_secs: s.turntable.duration_secs,
+            render_steps: s.render_steps,
+            supersample: s.supersample,
+            held_out_views: s.held_out_views,
+            threshold: s.simulator.threshold,
+            threshold_sigma: s.simulator.threshold_sigma,
+            refractory_secs: s.simulator.refractory_secs,
+            eps: s.simulator.eps,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+enum Kind {
+    #[default]
+    Interpolation,
+    Calibration,
+}
+
+/// `[experiment]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct ExperimentConfig {
+    kind: Kind,
+    /// Interpolation: known views per revolution, one condition each.
+    known_poses: Vec<usize>,
+    /// Calibration: axis tilts, degrees, one condition each.
+    axis_offsets_deg: Vec<f64>,
+}
+
+impl Default for ExperimentConfig {
+    fn default() -> Self {
+        Self {
+            kind: Kind::Interpolation,
+            known_poses: vec![20, 10, 6],
+            axis_offsets_deg: vec![0.24, 1.5, 2.85],
+        }
+    }
+}
+
+/// A pose model, named as in `metrics.json`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
+#[serde(rename_all = "snake_case")]
+enum Method {
+    Eventnerf,
+    Posenet,
+    TruePoses,
+}
+
+impl Method {
+    fn key(self) -> &'static str {
+        match self {
+            Self::Eventnerf => "eventnerf",
+            Self::Posenet => "posenet",
+            Self::TruePoses => "true_poses",
+        }
+    }
+}
+
+/// `[train]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct TrainConfig {
+    methods: Vec<Method>,
+    iterations: usize,
+    rays_per_step: usize,
+    windows_per_step: usize,
+    /// Window lengths `[min, max]` as fractions of the recording (EventNeRF: up to 50 of 1000
+    /// views).
+    window: [f64; 2],
+    neg_ratio: f64,
+    /// The loss' threshold `θ` (default: the simulator's) and `ε`.
+    threshold: Option<f64>,
+    eps: f64,
+    lr_field: BTreeMap<String, [f64; 2]>,
+    /// PoseNet: `[start, end]` for the translation and rotation networks.
+    posenet_lr_translation: [f64; 2],
+    posenet_lr_rotation: [f64; 2],
+    /// Fraction of the steps over which the pose learning rates ramp up from 0.
+    pose_warmup: f64,
+    /// Weight of the anchor at the known views.
+    anchor_weight: f64,
+    checkpoint_every: usize,
+    log_every: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            methods: vec![Method::Eventnerf, Method::Posenet],
+            iterations: 3000,
+            rays_per_step: 1024,
+            windows_per_step: 8,
+            window: [0.002, 0.05],
+            neg_ratio: 0.1,
+            threshold: None,
+            eps: 0.1,
+            lr_field: BTreeMap::from([
+                ("grid".to_owned(), [1e-2, 1e-3]),
+                ("mlp".to_owned(), [1e-3, 1e-4]),
+            ]),
+            posenet_lr_translation: [1e-3, 1e-5],
+            posenet_lr_rotation: [2e-4, 2e-6],
+            pose_warmup: 0.1,
+            anchor_weight: 1.0,
+            checkpoint_every: 1000,
+            log_every: 500,
+        }
+    }
+}
+
+/// `[render]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct RenderConfig {
+    samples: usize,
+    near: f64,
+    far: f64,
+    /// Constant colour behind the object (EventNeRF: 159/255 grey; the synthetic scene's is white).
+    background: Option<[f32; 3]>,
+    /// Radius of the sphere around the origin that holds the object (default: the synthetic
+    /// scene's bounding radius).
+    scene_radius: Option<f64>,
+}
+
+impl Default for RenderConfig {
+    fn default() -> Self {
+        Self {
+            samples: 48,
+            near: 1.0,
+            far: 9.0,
+            background: None,
+            scene_radius: None,
+        }
+    }
+}
+
+/// `[eval]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct EvalConfig {
+    /// Times at which poses are compared with the truth.
+    pose_samples: usize,
+    /// Held-out views saved as PNG (the first ones).
+    saved_views: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            pose_samples: 200,
+            saved_views: 2,
+        }
+    }
+}
+
+/// The recording: events, the true path, held-out views, and the camera.
+struct Recording {
+    scene: EventNerfScene,
+    truth: InitialPath,
+    /// Seconds of the recording (view 0 to the last view).
+    duration: f64,
+    /// What loading found worth saying.
+    note: String,
+}
+
+fn synthetic_recording(exp: &Experiment) -> anyhow::Result<Recording> {
+    let s = &exp.simulation;
+    if s.width == 0 || s.height == 0 || !(s.fov_x_deg > 0.0 && s.fov_x_deg < 180.0) {
+        bail!("[simulation]: need width, height ≥ 1 and 0 < fov_x_deg < 180");
+    }
+    let turntable = Turntable {
+        radius: s.radius,
+        height: s.camera_height,
+        duration_secs: s.duration_secs,
+        ..Turntable::default()
+    };
+    let config = SyntheticEventsConfig {
+        turntable: turntable.clone(),
+        camera: PinholeCamera::from_fov_x(s.width, s.height, s.fov_x_deg.to_radians()),
+        render_steps: s.render_steps,
+        supersample: s.supersample,
+        views: 2,
+        held_out_views: s.held_out_views,
+        held_out_supersample: 2,
+        simulator: SimulatorConfig {
+            threshold: s.threshold,
+            threshold_sigma: s.threshold_sigma,
+            refractory_secs: s.refractory_secs,
+            eps: s.eps,
+            ..SimulatorConfig::default()
+        },
+    };
+    let (scene, _) = simulate_eventnerf_scene(&SyntheticScene::object_centric(), &config)
+        .context("[simulation]")?;
+    Ok(Recording {
+        scene,
+        duration: turntable.duration_secs,
+        truth: InitialPath::Turntable(turntable),
+        note: format!("simulated with θ = {}", s.threshold),
+    })
+}
+
+fn eventnerf_recording(exp: &Experiment) -> anyhow::Result<Recording> {
+    let Some(path) = &exp.data.path else {
+        bail!("[data] path: the EventNeRF scene folder is required for source = \"eventnerf\"");
+    };
+    let options = EventNerfOptions {
+        split: exp.data.split.clone(),
+        ..EventNerfOptions::default()
+    };
+    let (scene, report) = read_eventnerf(path, &options)?;
+    let mut note = format!("{}: {report}", path.display());
+    if scene.distortion != [0.0; 2] {
+        note += &format!(
+            "; radial distortion {:?} is not modelled (pinhole rays)",
+            scene.distortion
+        );
+    }
+    let times: Vec<f64> = scene.view_times.iter().map(|t| t.as_secs_f64()).collect();
+    let duration = times.last().copied().unwrap_or(0.0);
+    let truth = KeyedPoses::new(times, scene.world_from_camera.clone())
+        .with_context(|| format!("{}: view poses", path.display()))?;
+    Ok(Recording {
+        scene,
+        truth: InitialPath::Keyed(truth),
+        duration,
+        note,
+    })
+}
+
+/// One condition: what is known of the path, and the anchors.
+struct Condition {
+    name: String,
+    initial: InitialPath,
+    anchors: Vec<(f64, Isometry3<f64>)>,
+    /// Whether the frame is fixed (anchors or a nominal axis through the same start pose); if
+    /// not, errors are also given after alignment.
+    align: bool,
+}
+
+fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition>> {
+    let e = &exp.experiment;
+    let mut out = Vec::new();
+    match e.kind {
+        Kind::Interpolation => {
+            for &k in &e.known_poses {
+                if k < 2 {
+                    bail!("[experiment] known_poses: need at least 2 known views, got {k}");
+                }
+                let times: Vec<f64> = (0..=k)
+                    .map(|i| i as f64 * rec.duration / k as f64)
+                    .collect();
+                let poses: Vec<_> = times.iter().map(|&t| rec.truth.at(t)).collect();
+                let anchors = times.iter().copied().zip(poses.iter().copied()).collect();
+                out.push(Condition {
+                    name: format!("K={k}"),
+                    initial: InitialPath::Keyed(KeyedPoses::new(times, poses)?),
+                    anchors,
+                    align: false,
+                });
+            }
+        }
+        Kind::Calibration => {
+            let InitialPath::Turntable(truth) = &rec.truth else {
+                bail!(
+                    "[experiment] kind = \"calibration\" needs [data] source = \"synthetic\": \
+                     a recording's own turntable axis is not known"
+                );
+            };
+            for &deg in &e.axis_offsets_deg {
+                if deg.is_nan() || deg.abs() >= 45.0 {
+                    bail!("[experiment] axis_offsets_deg: expected |offset| < 45°, got {deg}");
+                }
+                // The data turned about the true axis; training assumes one tilted by `deg`.
+                let nominal = Turntable {
+                    axis_tilt_rad: deg.to_radians(),
+                    ..truth.clone()
+                };
+                out.push(Condition {
+                    name: format!("offset={deg}deg"),
+                    initial: InitialPath::Turntable(nominal),
+                    anchors: Vec::new(),
+                    align: true,
+                });
+            }
+        }
+    }
+    if out.is_empty() {
+        bail!("[experiment]: no conditions (known_poses or axis_offsets_deg is empty)");
+    }
+    Ok(out)
+}
+
+/// One method's results, as in `metrics.json`.
+#[derive(Debug, Serialize)]
+struct MethodResult {
+    /// Mean rotation / translation error against the truth at the evaluation times.
+    rot_err_deg: f64,
+    trans_err: f64,
+    max_trans_err: f64,
+    /// The same after BARF's Procrustes alignment (calibration).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rot_err_deg_aligned: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    trans_err_aligned: Option<f64>,
+    /// Held-out views after colour correction.
+    psnr_db: Option<f64>,
+    ssim: Option<f64>,
+    /// Mean event loss of the last 100 steps.
+    final_loss: f64,
+    iterations: usize,
+    wall_s: f64,
+}
+
+fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
+    ExponentialDecay {
+        lr0: lr[0],
+        lr_end: lr[1],
+        max_iter: iterations as u64,
+    }
+}
+
+fn posenet(input: &TaskInput, range: TimeRange) -> anyhow::Result<Box<dyn PoseField>> {
+    let section = input.config.section("posenet");
+    let mut config: PoseNetConfig = if section.exists()? {
+        section.decode_params()?
+    } else {
+        PoseNetConfig::default()
+    };
+    config.seed = config.seed.wrapping_add(input.run.seed);
+    Ok(Box::new(config.init::<f32>(range)?))
+}
+
+fn field_config(input: &TaskInput) -> anyhow::Result<RadianceFieldConfig> {
+    let section = input.config.section("field");
+    let mut config = if section.exists()? {
+        section.decode::<RadianceFieldConfig>()?
+    } else {
+        RadianceFieldConfig::default()
+    };
+    let seed = input.run.seed;
+    match &mut config {
+        RadianceFieldConfig::Grid(c) => c.seed = c.seed.wrapping_add(seed),
+        RadianceFieldConfig::Mlp(c) => c.seed = c.seed.wrapping_add(seed),
+    }
+    Ok(config)
+}
+
+/// Everything the methods share in one run.
+struct Setup<'a> {
+    input: &'a TaskInput<'a>,
+    exp: &'a Experiment,
+    rec: &'a Recording,
+    field: RadianceFieldConfig,
+    bounds: SceneBounds,
+    settings: RenderSettings,
+    iterations: usize,
+    threshold: f64,
+    /// Where poses are compared with the truth, and the truth there.
+    eval_times: Vec<f64>,
+    truth: Vec<Isometry3<f64>>,
+}
+
+fn render_settings(r: &RenderConfig) -> anyhow::Result<(RenderSettings, SceneBounds)> {
+    if !(r.near > 0.0 && r.far > r.near && r.samples > 0) {
+        bail!("[render]: need samples ≥ 1 and 0 < near < far");
+    }
+    let radius = r
+        .scene_radius
+        .unwrap_or_else(|| SyntheticScene::object_centric().bounding_radius());
+    let bounds = SceneBounds {
+        centre: [0.0; 3],
+        radius,
+        unbounded: false,
+    };
+    let settings = RenderSettings {
+        samples: r.samples,
+        sampling: Sampling::Metric {
+            near: r.near,
+            far: r.far,
+        },
+        background: Some(r.background.unwrap_or([1.0; 3])),
+        clip: Some(Clip {
+            centre: bounds.centre,
+            radius,
+        }),
+        last_interval: LastInterval::Closed,
+    };
+    Ok((settings, bounds))
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let exp: Experiment = input.config.parse_params()?;
+    let field = field_config(input)?;
+    let (settings, bounds) = render_settings(&exp.render)?;
+    let train = &exp.train;
+    let threshold = train.threshold.unwrap_or(exp.simulation.threshold);
+    if !(threshold > 0.0 && train.eps > 0.0) {
+        bail!("[train]: need threshold > 0 and eps > 0");
+    }
+    if !(0.0..=1.0).contains(&train.pose_warmup) {
+        bail!(
+            "[train] pose_warmup = {} must lie in [0, 1]",
+            train.pose_warmup
+        );
+    }
+    let started = Instant::now();
+    let rec = match exp.data.source {
+        Source::Synthetic => synthetic_recording(&exp)?,
+        Source::Eventnerf => eventnerf_recording(&exp)?,
+    };
+    let conditions = conditions(&exp, &rec)?;
+    let iterations = input.run.iterations(train.iterations);
+    let camera = rec.scene.camera;
+    input.run_dir.log(format_args!(
+        "{} events of a {}×{} sensor over {:.2} s ({}; {:.1} s to load); {} held-out views; conditions {:?}; methods {:?}; {} steps of {} ray pairs in {} windows",
+        rec.scene.events.len(),
+        camera.width,
+        camera.height,
+        rec.duration,
+        rec.note,
+        started.elapsed().as_secs_f64(),
+        rec.scene.held_out.len(),
+        conditions.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(),
+        train.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
+        iterations,
+        train.rays_per_step,
+        train.windows_per_step,
+    ));
+    let samples = exp.eval.pose_samples.max(2);
+    let eval_times: Vec<f64> = (0..samples)
+        .map(|i| (i as f64 + 0.5) * rec.duration / samples as f64)
+        .collect();
+    let truth: Vec<_> = eval_times.iter().map(|&t| rec.truth.at(t)).collect();
+    write_trajectory(input, "traj_gt.txt", &eval_times, &truth)?;
+    let setup = Setup {
+        input,
+        exp: &exp,
+        rec: &rec,
+        field,
+        bounds,
+        settings,
+        iterations,
+        threshold,
+        eval_times,
+        truth,
+    };
+
+    let mut results: BTreeMap<String, BTreeMap<&str, MethodResult>> = BTreeMap::new();
+    for condition in &conditions {
+        for &method in &train.methods {
+            let result = run_method(&setup, condition, method)?;
+            results
+                .entry(condition.name.clone())
+                .or_default()
+                .insert(method.key(), result);
+            // Write as we go so a long run keeps what is done.
+            input.run_dir.write_json("metrics.json", &results)?;
+        }
+    }
+    Ok(())
+}
+
+/// Trains one method in one condition and evaluates it.
+fn run_method(
+    setup: &Setup<'_>,
+    condition: &Condition,
+    method: Method,
+) -> anyhow::Result<MethodResult> {
+    let Setup {
+        input,
+        exp,
+        rec,
+        iterations,
+        ..
+    } = *setup;
+    let train = &exp.train;
+    let started = Instant::now();
+    let tag = format!("{}_{}", condition.name, method.key());
+    let mut field = setup.field.init::<f32>(setup.bounds)?;
+    let initial = if method == Method::TruePoses {
+        rec.truth.clone()
+    } else {
+        condition.initial.clone()
+    };
+    let (correction, anchors) = match method {
+        Method::Posenet => {
+            let range = TimeRange::new(0.0, rec.duration)
+                .context("the recording needs a positive duration")?;
+            (Some(posenet(input, range)?), condition.anchors.clone())
+        }
+        _ => (None, Vec::new()),
+    };
+    let schedules = PoseSchedules {
+        rotation: decay(train.posenet_lr_rotation, iterations),
+        translation: decay(train.posenet_lr_translation, iterations),
+        pose: decay(train.posenet_lr_translation, iterations),
+        warmup: (train.pose_warmup * iterations as f64).round() as u64,
+    };
+    let mut poses = FramePoses::new(Vec::new(), Vec::new(), correction, schedules);
+    let schedule = EventSchedule {
+        iterations: iterations as u64,
+        rays_per_step: train.rays_per_step,
+        windows_per_step: train.windows_per_step,
+        window_secs: train.window.map(|f| f * rec.duration),
+        neg_ratio: train.neg_ratio,
+        loss: EventLoss {
+            threshold: setup.threshold as f32,
+            eps: train.eps as f32,
+        },
+        field_lr: train.lr_field.clone(),
+        anchor_weight: train.anchor_weight,
+        seed: input.run.seed,
+    };
+    let checkpoint = input.run_dir.file(format!("checkpoint_{tag}.bin"));
+    let progress = input.progress(iterations as u64, tag.clone());
+    let mut trainer = EventTrainer::new(
+        field.as_mut(),
+        &mut poses,
+        &initial,
+        anchors,
+        &rec.scene.events,
+        rec.scene.camera,
+        setup.settings,
+        schedule,
+    )
+    .context("[train]")?;
+    // The last 100 losses, a ring.
+    let mut recent = [0.0f64; 100];
+    let mut saved = None;
+    for it in 0..iterations {
+        let stats = trainer.step(it as u64).with_context(|| {
+            format!(
+                "{tag}: training stopped ({})",
+                saved.map_or("no checkpoint yet".to_owned(), |s| format!(
+                    "last good checkpoint: {}, after {s} steps",
+                    checkpoint.display()
+                ))
+            )
+        })?;
+        recent[it % recent.len()] = stats.loss;
+        progress.inc(1);
+        if train.checkpoint_every > 0 && (it + 1) % train.checkpoint_every == 0 {
+            trainer.save_checkpoint(&checkpoint, it as u64 + 1)?;
+            saved = Some(it + 1);
+        }
+        if train.log_every > 0 && (it + 1) % train.log_every == 0 {
+            let n = (it + 1).min(recent.len());
+            let progress = (it + 1) as f64 / iterations as f64;
+            let path = trainer.path_at(&setup.eval_times, progress)?;
+            let (rot, trans, _) = pose_errors(&setup.truth, &path);
+            input.run_dir.log(format_args!(
+                "{tag} {}/{iterations}: event loss {:.5}, anchor {:.2e}, {} events in the last step's windows; rotation {rot:.3}°, translation {trans:.4}",
+                it + 1,
+                recent.iter().take(n).sum::<f64>() / n as f64,
+                stats.anchor,
+                stats.events,
+            ));
+        }
+    }
+    progress.finish();
+    let estimate = trainer.path_at(&setup.eval_times, 1.0)?;
+    // The method's own camera at the first held-out view's time.
+    let own_pose = match rec.scene.held_out.first().and_then(|v| v.time) {
+        Some(t) => Some(trainer.path_at(&[t.as_secs_f64()], 1.0)?[0]),
+        None => None,
+    };
+    drop(trainer);
+    let wall_s = started.elapsed().as_secs_f64();
+    let init: Vec<_> = setup.eval_times.iter().map(|&t| initial.at(t)).collect();
+    let n = iterations.clamp(1, recent.len());
+    let result = evaluate(
+        setup,
+        &tag,
+        condition.align,
+        field.as_mut(),
+        Paths {
+            estimate: &estimate,
+            init: &init,
+            own_pose,
+        },
+        recent[..n].iter().sum::<f64>() / n as f64,
+        wall_s,
+    )?;
+    input.run_dir.log(format_args!(
+        "{tag}: rotation {:.3}°, translation {:.4} (max {:.4}){}, PSNR {}, SSIM {}, {:.0} s",
+        result.rot_err_deg,
+        result.trans_err,
+        result.max_trans_err,
+        match (result.rot_err_deg_aligned, result.trans_err_aligned) {
+            (Some(r), Some(t)) => format!("; aligned {r:.3}°, {t:.4}"),
+            _ => String::new(),
+        },
+        result
+            .psnr_db
+            .map_or("-".to_owned(), |p| format!("{p:.2} dB")),
+        result.ssim.map_or("-".to_owned(), |s| format!("{s:.3}")),
+        result.wall_s,
+    ));
+    Ok(result)
+}
+
+fn write_trajectory(
+    input: &TaskInput,
+    name: &str,
+    times: &[f64],
+    poses: &[Isometry3<f64>],
+) -> anyhow::Result<()> {
+    write_tum(
+        input.run_dir.file(name),
+        &Trajectory::new(times.to_vec(), poses.to_vec())?,
+    )?;
+    Ok(())
+}
+
+/// Mean rotation (°), mean and max translation error of `estimate` against `truth`.
+fn pose_errors(truth: &[Isometry3<f64>], estimate: &[Isometry3<f64>]) -> (f64, f64, f64) {
+    let n = truth.len().max(1) as f64;
+    let (mut rot, mut trans, mut max) = (0.0, 0.0, 0.0f64);
+    for (t, e) in truth.iter().zip(estimate) {
+        rot += t.rotation.angle_to(&e.rotation).to_degrees() / n;
+        let d = (t.translation.vector - e.translation.vector).norm();
+        trans += d / n;
+        max = max.max(d);
+    }
+    (rot, trans, max)
+}
+
+/// A method's path at the evaluation times, its initial path there, and its own camera at the
+/// first held-out view's time.
+struct Paths<'a> {
+    estimate: &'a [Isometry3<f64>],
+    init: &'a [Isometry3<f64>],
+    own_pose: Option<Isometry3<f64>>,
+}
+
+fn evaluate(
+    setup: &Setup<'_>,
+    tag: &str,
+    align: bool,
+    field: &mut dyn cpose_nerf::field3d::RadianceField,
+    paths: Paths<'_>,
+    final_loss: f64,
+    wall_s: f64,
+) -> anyhow::Result<MethodResult> {
+    let Setup {
+        input,
+        exp,
+        rec,
+        settings,
+        iterations,
+        ..
+    } = *setup;
+    let (times, truth) = (&setup.eval_times, &setup.truth);
+    let Paths {
+        estimate,
+        init,
+        own_pose,
+    } = paths;
+    let (rot_err_deg, trans_err, max_trans_err) = pose_errors(truth, estimate);
+    let aligned = if align {
+        Some(barf_pose_errors(truth, estimate, ReflectionFix::Kabsch)?)
+    } else {
+        None
+    };
+    write_trajectory(input, &format!("traj_{tag}.txt"), times, estimate)?;
+    trajectory_plot(480, truth, init, estimate)
+        .save_png(input.run_dir.file(format!("trajectory_{tag}.png")))?;
+
+    let held_out = &rec.scene.held_out;
+    let (mut psnr_db, mut ssim_mean) = (None, None);
+    if !held_out.is_empty() {
+        let mut renderer = Renderer::default();
+        let renders: Vec<_> = held_out
+            .iter()
+            .map(|view| {
+                let pose = match &aligned {
+                    Some(a) => a.alignment.gt_to_learned(&view.world_from_camera),
+                    None => view.world_from_camera,
+                };
+                render_view(
+                    &mut renderer,
+                    field,
+                    &settings,
+                    &rec.scene.camera,
+                    &pose,
+                    4096,
+                )
+            })
+            .collect();
+        let images: Vec<Image> = renders.iter().map(|r| r.image.clone()).collect();
+        let truths: Vec<Image> = held_out.iter().map(|v| v.image.clone()).collect();
+        let correction = ColourCorrection::fit(&images, &truths);
+        let (mut p, mut s) = (0.0, 0.0);
+        let (near, far) = (exp.render.near, exp.render.far);
+        for (k, ((render, image), truth)) in renders.iter().zip(&images).zip(&truths).enumerate() {
+            let corrected = correction.apply(image);
+            p += psnr(corrected.data(), truth.data());
+            s += ssim(&corrected, truth);
+            if k < exp.eval.saved_views {
+                let (w, h) = (truth.width(), truth.height());
+                side_by_side(&corrected, truth)
+                    .save_png(input.run_dir.file(format!("view_{k}_{tag}.png")))?;
+                depth_image(w, h, &render.depth, &render.opacity, near, far)
+                    .save_png(input.run_dir.file(format!("depth_{k}_{tag}.png")))?;
+            }
+        }
+        if let Some(pose) = own_pose {
+            // What the method's own camera sees (a mis-calibrated path shows the object
+            // off-centre), beside the true view.
+            let view = render_view(
+                &mut renderer,
+                field,
+                &settings,
+                &rec.scene.camera,
+                &pose,
+                4096,
+            );
+            side_by_side(&correction.apply(&view.image), &truths[0])
+                .save_png(input.run_dir.file(format!("own_view_{tag}.png")))?;
+        }
+        let n = held_out.len() as f64;
+        psnr_db = Some(p / n);
+        ssim_mean = Some(s / n);
+    }
+    Ok(MethodResult {
+        rot_err_deg,
+        trans_err,
+        max_trans_err,
+        rot_err_deg_aligned: aligned.as_ref().map(|a| a.rot_err_deg),
+        trans_err_aligned: aligned.as_ref().map(|a| a.trans_err),
+        psnr_db,
+        ssim: ssim_mean,
+        final_loss,
+        iterations,
+        wall_s,
+    })
+}
+
+/// `a | b` side by side.
+fn side_by_side(a: &Image, b: &Image) -> Image {
+    let (w, h) = (a.width(), a.height());
+    Image::from_fn(2 * w, h, |x, y| {
+        if x < w {
+            a.pixel(x, y)
+        } else {
+            b.pixel(x - w, y)
+        }
+    })
+}

@@ -1,0 +1,652 @@
+//! EventNeRF training with a pose at every window end (paper §4.2; algorithms.md §4.3–4.5).
+//!
+//! EventNeRF sums the events between two stored views and renders both views. Here the two
+//! ends of every window are arbitrary times `τ_s < τ_e`, and the cameras there are
+//! `C(τ) ∘ init(τ)` ([`FramePoses`]): `init` is what is known of the path — poses interpolated
+//! between a few known views ([`KeyedPoses`]), or a nominal turntable — and `C` the pose
+//! correction (PoseNet; none for EventNeRF's fixed poses). Each step:
+//!
+//! 1. draws `windows_per_step` windows, `τ_e ~ U` over the recording and `τ_e − τ_s ~ U` over
+//!    `[min, max]` window lengths, and evaluates all `2W` poses (and the anchors') in one
+//!    batched call of the correction;
+//! 2. per window sums the polarities of `[τ_s, τ_e)` per pixel (`E`), takes `1 − neg_ratio` of
+//!    its rays at pixels with `E ≠ 0` (with replacement) and the rest uniformly over the
+//!    sensor (EventNeRF's negative sampling);
+//! 3. renders each pixel at both ends with the same jittered depth strata (one batch), and takes one Adam
+//!    step on the field and one on the correction from [`EventLoss`] plus, with known views, the
+//!    anchor `λ Σ_k (‖t(t_k) − t_k‖² + ‖q(t_k) − q_k‖²) / K` that holds the corrected path at
+//!    them.
+
+use std::collections::BTreeMap;
+use std::ops::Range;
+
+use anyhow::bail;
+use cpose_core::Timestamp;
+use cpose_core::nn::{Adam, ExponentialDecay};
+use cpose_nerf::camera::{PinholeCamera, PoseGradient};
+use cpose_nerf::field3d::RadianceField;
+use cpose_nerf::nerf::poses::FramePoses;
+use cpose_nerf::nerf::render::{CameraRay, RenderSettings, Renderer};
+use cpose_nerf::volume::Composited;
+use nalgebra::{Isometry3, Quaternion, Translation3, Vector3};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::loss::EventLoss;
+use crate::simulate::bayer_channel;
+use crate::stream::EventStream;
+use crate::turntable::Turntable;
+
+/// Poses known at increasing times, interpolated in between: slerp for the rotation and a
+/// straight line for the position (the paper's interpolation baseline). Constant outside.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeyedPoses {
+    times: Vec<f64>,
+    poses: Vec<Isometry3<f64>>,
+}
+
+impl KeyedPoses {
+    /// Errors unless there is one pose per time and the times strictly increase.
+    pub fn new(times: Vec<f64>, poses: Vec<Isometry3<f64>>) -> anyhow::Result<Self> {
+        if times.is_empty() || times.len() != poses.len() {
+            bail!("{} key times for {} key poses", times.len(), poses.len());
+        }
+        if let Some(w) = times
+            .windows(2)
+            .find(|w| w[0].partial_cmp(&w[1]) != Some(std::cmp::Ordering::Less))
+        {
+            bail!("key times must increase, found {} then {}", w[0], w[1]);
+        }
+        Ok(Self { times, poses })
+    }
+
+    /// The key times.
+    pub fn times(&self) -> &[f64] {
+        &self.times
+    }
+
+    /// The key poses.
+    pub fn poses(&self) -> &[Isometry3<f64>] {
+        &self.poses
+    }
+
+    /// The interpolated pose at `t`.
+    pub fn at(&self, t: f64) -> Isometry3<f64> {
+        let i = self.times.partition_point(|&k| k <= t);
+        if i == 0 {
+            return self.poses[0];
+        }
+        if i == self.times.len() {
+            return self.poses[i - 1];
+        }
+        let (a, b) = (&self.poses[i - 1], &self.poses[i]);
+        let s = (t - self.times[i - 1]) / (self.times[i] - self.times[i - 1]);
+        let rotation = a
+            .rotation
+            .try_slerp(&b.rotation, s, 1e-12)
+            .unwrap_or(a.rotation);
+        let position = a.translation.vector.lerp(&b.translation.vector, s);
+        Isometry3::from_parts(Translation3::from(position), rotation)
+    }
+}
+
+/// What is known of the camera path before training.
+#[derive(Clone, Debug, PartialEq)]
+pub enum InitialPath {
+    /// Known views, interpolated in between.
+    Keyed(KeyedPoses),
+    /// A turntable revolution (e.g. about a mis-calibrated axis).
+    Turntable(Turntable),
+}
+
+impl InitialPath {
+    /// `world_from_camera` at `t` seconds.
+    pub fn at(&self, t: f64) -> Isometry3<f64> {
+        match self {
+            Self::Keyed(k) => k.at(t),
+            Self::Turntable(tt) => tt.world_from_camera(t),
+        }
+    }
+}
+
+/// Settings of one EventNeRF training run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EventSchedule {
+    /// Steps.
+    pub iterations: u64,
+    /// Ray pairs per step, over all windows.
+    pub rays_per_step: usize,
+    /// Windows per step (each with its own two poses).
+    pub windows_per_step: usize,
+    /// Window lengths `[min, max]`, seconds.
+    pub window_secs: [f64; 2],
+    /// Share of each window's rays drawn uniformly over the sensor (EventNeRF: 0.1).
+    pub neg_ratio: f64,
+    /// The loss' threshold and `ε`.
+    pub loss: EventLoss,
+    /// Learning rate `[start, end]` (exponential decay) per parameter group of the field.
+    pub field_lr: BTreeMap<String, [f64; 2]>,
+    /// Weight `λ` of the anchor at the known views.
+    pub anchor_weight: f64,
+    /// Seed of the window, pixel and depth draws.
+    pub seed: u64,
+}
+
+/// One step's numbers.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StepStats {
+    /// EventNeRF's loss (mean over rays × 3 channels).
+    pub loss: f64,
+    /// The anchor term (0 without anchors).
+    pub anchor: f64,
+    /// Events summed in the step's windows.
+    pub events: usize,
+}
+
+/// One EventNeRF training run's state.
+pub struct EventTrainer<'a> {
+    field: &'a mut dyn RadianceField,
+    poses: &'a mut FramePoses,
+    initial: &'a InitialPath,
+    /// Known `(time, pose)` the corrected path is held at.
+    anchors: Vec<(f64, Isometry3<f64>)>,
+    events: &'a EventStream,
+    camera: PinholeCamera,
+    settings: RenderSettings,
+    schedule: EventSchedule,
+    /// The recording's time span, seconds.
+    span: [f64; 2],
+    groups: Vec<(Range<usize>, ExponentialDecay)>,
+    adam: Adam<f32>,
+    rng: ChaCha8Rng,
+    renderer: Renderer,
+    /// The step's rays: every pair's start, then every pair's end.
+    rays: Vec<CameraRay>,
+    ends: Vec<CameraRay>,
+    /// Stratum offsets, the same for both rays of a pair.
+    offsets: Vec<f64>,
+    /// Per ray pair: its pixel's polarity sum and Bayer channel.
+    sums: Vec<f32>,
+    channels: Vec<u8>,
+    /// The event frame of the current window (zero outside `touched`).
+    frame: Vec<f32>,
+    touched: Vec<usize>,
+    nonzero: Vec<usize>,
+    times: Vec<f64>,
+    init: Vec<Isometry3<f64>>,
+    grad_out: Vec<Composited<f32>>,
+    grad_params: Vec<f32>,
+    pose_grads: Vec<PoseGradient>,
+    pose_cotangents: Vec<(Quaternion<f64>, Vector3<f64>)>,
+}
+
+impl<'a> EventTrainer<'a> {
+    /// A run over `events` (time origin 0 s, sensor of `camera`'s size) with poses
+    /// `poses' correction ∘ initial`, holding the path at `anchors` when given.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        field: &'a mut dyn RadianceField,
+        poses: &'a mut FramePoses,
+        initial: &'a InitialPath,
+        anchors: Vec<(f64, Isometry3<f64>)>,
+        events: &'a EventStream,
+        camera: PinholeCamera,
+        settings: RenderSettings,
+        schedule: EventSchedule,
+    ) -> anyhow::Result<Self> {
+        if (usize::from(events.width()), usize::from(events.height()))
+            != (camera.width, camera.height)
+        {
+            bail!(
+                "events of a {}×{} sensor for a {}×{} camera",
+                events.width(),
+                events.height(),
+                camera.width,
+                camera.height
+            );
+        }
+        let Some((first, last)) = events.time_span() else {
+            bail!("no events to train on");
+        };
+        let span = [0.0f64.min(first.as_secs_f64()), last.as_secs_f64()];
+        let [w_min, w_max] = schedule.window_secs;
+        if !(w_min > 0.0 && w_max >= w_min && w_max < span[1] - span[0]) {
+            bail!(
+                "window lengths [{w_min}, {w_max}] s: need 0 < min ≤ max < the recording's {} s",
+                span[1] - span[0]
+            );
+        }
+        if schedule.windows_per_step == 0 || schedule.rays_per_step < schedule.windows_per_step {
+            bail!(
+                "need at least one window per step and one ray per window ({} rays, {} windows)",
+                schedule.rays_per_step,
+                schedule.windows_per_step
+            );
+        }
+        if !(0.0..=1.0).contains(&schedule.neg_ratio) {
+            bail!("neg_ratio = {} must lie in [0, 1]", schedule.neg_ratio);
+        }
+        let mut groups = Vec::new();
+        for (name, range) in field.param_groups() {
+            let Some(&[lr0, lr_end]) = schedule.field_lr.get(name) else {
+                bail!("no learning rate for the field's parameter group {name:?}");
+            };
+            let max_iter = schedule.iterations;
+            groups.push((
+                range,
+                ExponentialDecay {
+                    lr0,
+                    lr_end,
+                    max_iter,
+                },
+            ));
+        }
+        let n = field.num_params();
+        let pixels = camera.width * camera.height;
+        Ok(Self {
+            adam: Adam::new(n),
+            grad_params: vec![0.0; n],
+            rng: ChaCha8Rng::seed_from_u64(schedule.seed),
+            frame: vec![0.0; pixels],
+            field,
+            poses,
+            initial,
+            anchors,
+            events,
+            camera,
+            settings,
+            schedule,
+            span,
+            groups,
+            renderer: Renderer::default(),
+            rays: Vec::new(),
+            ends: Vec::new(),
+            offsets: Vec::new(),
+            sums: Vec::new(),
+            channels: Vec::new(),
+            touched: Vec::new(),
+            nonzero: Vec::new(),
+            times: Vec::new(),
+            init: Vec::new(),
+            grad_out: Vec::new(),
+            pose_grads: Vec::new(),
+            pose_cotangents: Vec::new(),
+        })
+    }
+
+    /// The poses being optimised (those of the last step's windows and anchors).
+    pub fn poses(&self) -> &FramePoses {
+        self.poses
+    }
+
+    /// The current path `C(t) ∘ init(t)` at `times` (at the end of training: `progress = 1`).
+    pub fn path_at(&mut self, times: &[f64], progress: f64) -> anyhow::Result<Vec<Isometry3<f64>>> {
+        self.init.clear();
+        self.init.extend(times.iter().map(|&t| self.initial.at(t)));
+        self.poses.set_frames(&self.init, times);
+        Ok(self.poses.update(progress)?.to_vec())
+    }
+
+    /// Draws the step's windows: `[τ_s, τ_e]` pairs into `times`.
+    fn draw_windows(&mut self) {
+        let [w_min, w_max] = self.schedule.window_secs;
+        let [t0, t1] = self.span;
+        self.times.clear();
+        for _ in 0..self.schedule.windows_per_step {
+            let end = self.rng.random_range(t0 + w_min..=t1);
+            let len = self.rng.random_range(w_min..=w_max).min(end - t0);
+            self.times.extend([end - len, end]);
+        }
+    }
+
+    /// Sums the polarities of `[start, end)` into `frame`, listing the pixels with `E ≠ 0`;
+    /// returns the number of events.
+    fn accumulate(&mut self, start: f64, end: f64) -> anyhow::Result<usize> {
+        for &p in &self.touched {
+            self.frame[p] = 0.0;
+        }
+        self.touched.clear();
+        self.nonzero.clear();
+        let window = self.events.window(
+            Timestamp::from_secs_f64(start),
+            Timestamp::from_secs_f64(end),
+        )?;
+        let w = self.camera.width;
+        for ((&x, &y), &p) in window.x().iter().zip(window.y()).zip(window.p()) {
+            let i = usize::from(y) * w + usize::from(x);
+            if self.frame[i] == 0.0 {
+                self.touched.push(i);
+            }
+            self.frame[i] += f32::from(p);
+        }
+        // A pixel touched twice with opposite polarities may be listed twice or be back at 0.
+        self.touched.sort_unstable();
+        self.touched.dedup();
+        self.nonzero
+            .extend(self.touched.iter().filter(|&&i| self.frame[i] != 0.0));
+        Ok(window.len())
+    }
+
+    /// One step at iteration `it`.
+    pub fn step(&mut self, it: u64) -> anyhow::Result<StepStats> {
+        let progress = it as f64 / self.schedule.iterations.max(1) as f64;
+        self.field.set_progress(progress);
+        self.draw_windows();
+        let windows = self.schedule.windows_per_step;
+        self.times.extend(self.anchors.iter().map(|a| a.0));
+        self.init.clear();
+        self.init
+            .extend(self.times.iter().map(|&t| self.initial.at(t)));
+        self.poses.set_frames(&self.init, &self.times);
+        self.poses.update(progress)?;
+
+        // Rays: window w's start camera is 2w, its end camera 2w + 1.
+        let (w, h) = (self.camera.width, self.camera.height);
+        let per_window = self.schedule.rays_per_step / windows;
+        let positives = ((1.0 - self.schedule.neg_ratio) * per_window as f64).round() as usize;
+        self.rays.clear();
+        self.ends.clear();
+        self.sums.clear();
+        self.channels.clear();
+        let mut events = 0;
+        for k in 0..windows {
+            let (start, end) = (self.times[2 * k], self.times[2 * k + 1]);
+            events += self.accumulate(start, end)?;
+            for j in 0..per_window {
+                let p = if j < positives && !self.nonzero.is_empty() {
+                    self.nonzero[self.rng.random_range(0..self.nonzero.len())]
+                } else {
+                    self.rng.random_range(0..w * h)
+                };
+                let (x, y) = (p % w, p / w);
+                let d_cam = self.camera.ray_direction_cam(x, y);
+                let current = self.poses.current();
+                self.rays
+                    .push(CameraRay::new(2 * k, &current[2 * k], d_cam));
+                self.ends
+                    .push(CameraRay::new(2 * k + 1, &current[2 * k + 1], d_cam));
+                self.sums.push(self.frame[p]);
+                self.channels.push(bayer_channel(x, y) as u8);
+            }
+        }
+
+        // Both ends at the same depth strata: the same jitter offsets.
+        let n = self.ends.len();
+        self.rays.append(&mut self.ends);
+        let k = self.settings.samples;
+        self.offsets.clear();
+        for _ in 0..n * k {
+            self.offsets.push(self.rng.random());
+        }
+        self.offsets.extend_from_within(..);
+        let out = self.renderer.forward_with_offsets(
+            &mut *self.field,
+            &self.settings,
+            &self.rays,
+            &self.offsets,
+        );
+        let scale = 1.0 / (3 * n) as f32;
+        self.grad_out.clear();
+        self.grad_out.resize(2 * n, Composited::default());
+        let mut loss = 0.0f64;
+        for i in 0..n {
+            let c = usize::from(self.channels[i]);
+            let (v, gs, ge) = self.schedule.loss.value_and_grad(
+                out[i].rgb[c],
+                out[n + i].rgb[c],
+                self.sums[i],
+                scale,
+            );
+            loss += f64::from(v);
+            self.grad_out[i].rgb[c] = gs;
+            self.grad_out[n + i].rgb[c] = ge;
+        }
+        if !loss.is_finite() {
+            bail!("the event loss is {loss} at iteration {it}");
+        }
+
+        self.grad_params.fill(0.0);
+        let trainable = self.poses.is_trainable();
+        self.pose_grads.clear();
+        self.pose_grads
+            .resize(self.times.len(), PoseGradient::new());
+        self.renderer.backward(
+            &mut *self.field,
+            &self.settings,
+            &self.rays,
+            &self.grad_out,
+            &mut self.grad_params,
+            trainable.then_some(&mut self.pose_grads[..]),
+        );
+        self.adam.begin_step();
+        let params = self.field.params_mut();
+        for (range, decay) in &self.groups {
+            self.adam.update(
+                range.start,
+                &mut params[range.clone()],
+                &self.grad_params[range.clone()],
+                decay.lr(it),
+            );
+        }
+        let mut anchor = 0.0;
+        if trainable {
+            let current = self.poses.current();
+            self.pose_cotangents.clear();
+            for (g, pose) in self.pose_grads.iter().zip(current) {
+                self.pose_cotangents
+                    .push(g.quaternion_translation(&pose.rotation));
+            }
+            // The anchor term on the composed poses at the known times.
+            let weight = self.schedule.anchor_weight / self.anchors.len().max(1) as f64;
+            for (k, (_, known)) in self.anchors.iter().enumerate() {
+                let pose = &current[2 * windows + k];
+                let dt = pose.translation.vector - known.translation.vector;
+                let (q, qk) = (pose.rotation.coords, known.rotation.coords);
+                let dq = if q.dot(&qk) < 0.0 { q + qk } else { q - qk };
+                anchor += weight * (dt.norm_squared() + dq.norm_squared());
+                let (gq, gt) = &mut self.pose_cotangents[2 * windows + k];
+                *gq += Quaternion::from(dq * (2.0 * weight));
+                *gt += dt * (2.0 * weight);
+            }
+            self.poses.step(&self.pose_cotangents, it)?;
+        }
+        Ok(StepStats {
+            loss,
+            anchor,
+            events,
+        })
+    }
+
+    /// The field's and the correction's parameters to `path` after `iterations` steps
+    /// ([`cpose_nerf::nerf::train::write_checkpoint`]).
+    pub fn save_checkpoint(&self, path: &std::path::Path, iterations: u64) -> anyhow::Result<()> {
+        cpose_nerf::nerf::train::write_checkpoint(
+            path,
+            iterations,
+            self.field.params(),
+            &self.poses.params(),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::UnitQuaternion;
+
+    use super::*;
+
+    /// A small recording: the default turntable seen by a 43 × 32 sensor, 120 renders.
+    fn tiny() -> (crate::EventNerfScene, Turntable) {
+        let config = crate::SyntheticEventsConfig {
+            camera: crate::SyntheticEventsConfig::default().camera.scaled(0.25),
+            render_steps: 120,
+            held_out_views: 0,
+            ..Default::default()
+        };
+        let scene = cpose_nerf::scene::SyntheticScene::object_centric();
+        let (data, _) = crate::simulate_eventnerf_scene(&scene, &config).unwrap();
+        (data, config.turntable)
+    }
+
+    fn settings() -> RenderSettings {
+        RenderSettings {
+            samples: 24,
+            sampling: cpose_nerf::volume::Sampling::Metric {
+                near: 1.0,
+                far: 9.0,
+            },
+            background: Some([1.0; 3]),
+            clip: Some(cpose_nerf::nerf::render::Clip {
+                centre: [0.0; 3],
+                radius: 1.8,
+            }),
+            last_interval: cpose_nerf::volume::LastInterval::Closed,
+        }
+    }
+
+    fn schedule(iterations: u64) -> EventSchedule {
+        EventSchedule {
+            iterations,
+            rays_per_step: 256,
+            windows_per_step: 4,
+            window_secs: [0.05, 0.5],
+            neg_ratio: 0.1,
+            loss: EventLoss {
+                threshold: 0.25,
+                eps: 0.1,
+            },
+            field_lr: BTreeMap::from([
+                ("grid".to_owned(), [1e-2, 1e-3]),
+                ("mlp".to_owned(), [1e-3, 1e-4]),
+            ]),
+            anchor_weight: 1.0,
+            seed: 1,
+        }
+    }
+
+    fn fixed_poses() -> FramePoses {
+        let decay = ExponentialDecay {
+            lr0: 0.0,
+            lr_end: 0.0,
+            max_iter: 1,
+        };
+        let schedules = cpose_nerf::nerf::poses::PoseSchedules {
+            rotation: decay,
+            translation: decay,
+            pose: decay,
+            warmup: 0,
+        };
+        FramePoses::new(Vec::new(), Vec::new(), None, schedules)
+    }
+
+    /// With the true poses, EventNeRF's loss falls well below that of the blank field.
+    #[test]
+    fn training_on_true_poses_lowers_the_event_loss() {
+        let (data, tt) = tiny();
+        let initial = InitialPath::Turntable(tt);
+        let bounds = cpose_nerf::field3d::SceneBounds {
+            centre: [0.0; 3],
+            radius: 1.8,
+            unbounded: false,
+        };
+        let mut field = cpose_nerf::field3d::RadianceFieldConfig::default()
+            .init::<f32>(bounds)
+            .unwrap();
+        let mut poses = fixed_poses();
+        let steps = 300;
+        let mut trainer = EventTrainer::new(
+            field.as_mut(),
+            &mut poses,
+            &initial,
+            Vec::new(),
+            &data.events,
+            data.camera,
+            settings(),
+            schedule(steps),
+        )
+        .unwrap();
+        let losses: Vec<f64> = (0..steps)
+            .map(|it| trainer.step(it).unwrap().loss)
+            .collect();
+        let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+        let (first, last) = (mean(&losses[..30]), mean(&losses[steps as usize - 30..]));
+        assert!(last < 0.7 * first, "first {first}, last {last}");
+    }
+
+    #[test]
+    fn bad_setups_are_errors() {
+        let (data, tt) = tiny();
+        let initial = InitialPath::Turntable(tt);
+        let bounds = cpose_nerf::field3d::SceneBounds {
+            centre: [0.0; 3],
+            radius: 1.8,
+            unbounded: false,
+        };
+        let mut field = cpose_nerf::field3d::RadianceFieldConfig::default()
+            .init::<f32>(bounds)
+            .unwrap();
+        let mut poses = fixed_poses();
+        let mut check = |events: &EventStream, camera: PinholeCamera, s: EventSchedule, what| {
+            let err = EventTrainer::new(
+                field.as_mut(),
+                &mut poses,
+                &initial,
+                Vec::new(),
+                events,
+                camera,
+                settings(),
+                s,
+            )
+            .err()
+            .unwrap_or_else(|| panic!("{what} accepted"));
+            err.to_string()
+        };
+        let empty = EventStream::new(data.events.width(), data.events.height()).unwrap();
+        assert!(check(&empty, data.camera, schedule(1), "no events").contains("no events"));
+        let wrong = data.camera.scaled(2.0);
+        assert!(check(&data.events, wrong, schedule(1), "a wrong sensor").contains("sensor"));
+        let mut long = schedule(1);
+        long.window_secs = [0.1, 20.0];
+        assert!(check(&data.events, data.camera, long, "a long window").contains("window"));
+        let mut none = schedule(1);
+        none.windows_per_step = 0;
+        assert!(check(&data.events, data.camera, none, "no windows").contains("window"));
+    }
+
+    #[test]
+    fn keyed_poses_interpolate_by_slerp_and_line() {
+        let a = Isometry3::from_parts(Translation3::new(1.0, 0.0, 0.0), UnitQuaternion::identity());
+        let b = Isometry3::from_parts(
+            Translation3::new(0.0, 1.0, 0.0),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 1.0),
+        );
+        let keyed = KeyedPoses::new(vec![0.0, 2.0], vec![a, b]).unwrap();
+        let mid = keyed.at(1.0);
+        assert!((mid.translation.vector - Vector3::new(0.5, 0.5, 0.0)).norm() < 1e-12);
+        assert!((mid.rotation.angle() - 0.5).abs() < 1e-12);
+        assert_eq!(keyed.at(-1.0), a);
+        assert_eq!(keyed.at(5.0), b);
+        assert_eq!(keyed.at(2.0), b);
+        assert!(KeyedPoses::new(vec![0.0, 0.0], vec![a, b]).is_err());
+        assert!(KeyedPoses::new(vec![0.0], vec![a, b]).is_err());
+    }
+
+    /// Slerp between two poses of a turntable is exact for the rotation (one axis, constant
+    /// rate); the position cuts the chord, `r (1 − cos(π/K))` inside the circle half-way.
+    #[test]
+    fn interpolating_a_turntable_errs_by_the_chord_sag() {
+        let tt = Turntable::default();
+        let k = 6;
+        let times: Vec<f64> = (0..=k)
+            .map(|i| i as f64 * tt.duration_secs / k as f64)
+            .collect();
+        let poses = times.iter().map(|&t| tt.world_from_camera(t)).collect();
+        let keyed = KeyedPoses::new(times, poses).unwrap();
+        let t = 0.5 * tt.duration_secs / k as f64;
+        let (truth, interp) = (tt.world_from_camera(t), keyed.at(t));
+        assert!(truth.rotation.angle_to(&interp.rotation) < 1e-9);
+        let sag = tt.radius * (1.0 - (std::f64::consts::PI / k as f64).cos());
+        let err = (truth.translation.vector - interp.translation.vector).norm();
+        assert!((err - sag).abs() < 1e-9, "{err} vs {sag}");
+    }
+}
