@@ -724,3 +724,66 @@ fn slam_imu_runs_on_simulated_and_real_imu() {
     assert!(err.contains("imu0/sensor.yaml"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// Task `events` on an EventNeRF folder written by the simulator: the views are the truth, the
+/// known poses a subset; a folder without events is one clear error naming it.
+#[test]
+fn events_reads_an_eventnerf_folder() {
+    use cpose_events::{SyntheticEventsConfig, write_synthetic_eventnerf};
+    let root = temp_dir("events-folder");
+    let scene_dir = root.join("turntable");
+    let config = SyntheticEventsConfig {
+        camera: SyntheticEventsConfig::default().camera.scaled(0.15),
+        render_steps: 40,
+        views: 21,
+        held_out_views: 1,
+        ..Default::default()
+    };
+    let scene = cpose_events::cpose_nerf::scene::SyntheticScene::object_centric();
+    write_synthetic_eventnerf(&scene_dir, &scene, &config).unwrap();
+    let out_dir = root.join("run");
+    let path = format!("data.path={}", scene_dir.display());
+    let mut args = vec![
+        "run",
+        "configs/events_interp.toml",
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--force",
+        "-q",
+    ];
+    for set in [
+        "data.source=\"eventnerf\"",
+        path.as_str(),
+        "experiment.known_poses=[4]",
+        "train.iterations=20",
+        "train.rays_per_step=64",
+        "train.windows_per_step=2",
+        "render.samples=12",
+        "eval.pose_samples=10",
+        "run.threads=1",
+    ] {
+        args.extend(["--set", set]);
+    }
+    let out = cpose_in(&workspace_root(), &args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("metrics.json")).unwrap())
+            .unwrap();
+    for method in ["eventnerf", "posenet"] {
+        let err = metrics["K=4"][method]["trans_err"].as_f64();
+        assert!(err.is_some_and(f64::is_finite), "{metrics}");
+    }
+    // The interpolation baseline cuts the chords of the turntable circle.
+    assert!(metrics["K=4"]["eventnerf"]["trans_err"].as_f64().unwrap() > 0.1);
+
+    std::fs::remove_dir_all(scene_dir.join("train/events")).unwrap();
+    let out = cpose_in(&workspace_root(), &args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("events"), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+}
