@@ -78,6 +78,7 @@ fn bench(c: &mut Criterion) {
         rays_per_step: 1024,
         windows_per_step: 8,
         window_secs: [0.02, 0.5],
+        time_span: Some([0.0, tt.duration_secs]),
         neg_ratio: 0.1,
         loss: EventLoss {
             threshold: 0.25,

@@ -93,6 +93,16 @@ mod tests {
         }
     }
 
+    /// The loss' log intensity is the simulator's, so simulated events are what it expects.
+    #[test]
+    fn log_intensity_is_the_simulators() {
+        for v in [0.0f32, 0.01, 0.3, 0.99, 1.0] {
+            let a = f64::from(loss().log_intensity(v));
+            let b = crate::simulate::log_intensity(f64::from(v), 0.1);
+            assert!((a - b).abs() < 1e-6, "{v}: {a} vs {b}");
+        }
+    }
+
     /// A brightness change of exactly `n` thresholds in log intensity costs nothing; one
     /// threshold more costs `θ²`.
     #[test]

@@ -20,10 +20,13 @@
 //! are the truth (interpolated between them).
 //!
 //! Pose errors are measured at `eval.pose_samples` times spread over the recording: mean
-//! rotation (°) and translation (scene units) error against the truth, as they are (anchored
-//! or nominal paths fix the frame) and, for calibration, also after BARF's Procrustes
-//! alignment. Held-out views are rendered at the true poses (mapped by that alignment) and
-//! scored with PSNR and SSIM after EventNeRF's colour correction ([`ColourCorrection`]).
+//! rotation (°) and translation (scene units) error against the truth as they are, and after
+//! BARF's Procrustes alignment — a similarity, because events fix neither the scene's frame nor
+//! its scale: a scene scaled by `s` seen from a path scaled by `s` fires the same events, and
+//! known views pin the scale only where they are (measured: PoseNet recovers the circle, at the
+//! interpolated polygon's mean radius). Held-out views are rendered at the true poses mapped by
+//! that alignment, as BARF evaluates, and scored with PSNR and SSIM after EventNeRF's colour
+//! correction ([`ColourCorrection`]).
 //!
 //! Outputs: `metrics.json` (`{condition: {method: {…}}}`), `traj_gt.txt` and
 //! `traj_<condition>_<method>.txt` (TUM, at the evaluation times), `trajectory_<condition>_<method>.png`,
@@ -388,9 +391,6 @@ struct Condition {
     name: String,
     initial: InitialPath,
     anchors: Vec<(f64, Isometry3<f64>)>,
-    /// Whether the frame is fixed (anchors or a nominal axis through the same start pose); if
-    /// not, errors are also given after alignment.
-    align: bool,
 }
 
 fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition>> {
@@ -411,7 +411,6 @@ fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition
                     name: format!("K={k}"),
                     initial: InitialPath::Keyed(KeyedPoses::new(times, poses)?),
                     anchors,
-                    align: false,
                 });
             }
         }
@@ -435,7 +434,6 @@ fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition
                     name: format!("offset={deg}deg"),
                     initial: InitialPath::Turntable(nominal),
                     anchors: Vec::new(),
-                    align: true,
                 });
             }
         }
@@ -453,11 +451,10 @@ struct MethodResult {
     rot_err_deg: f64,
     trans_err: f64,
     max_trans_err: f64,
-    /// The same after BARF's Procrustes alignment (calibration).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    rot_err_deg_aligned: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    trans_err_aligned: Option<f64>,
+    /// The same after BARF's Procrustes alignment (a similarity: events fix neither the
+    /// scene's scale nor its frame).
+    rot_err_deg_aligned: f64,
+    trans_err_aligned: f64,
     /// Held-out views after colour correction.
     psnr_db: Option<f64>,
     ssim: Option<f64>,
@@ -511,6 +508,8 @@ struct Setup<'a> {
     settings: RenderSettings,
     iterations: usize,
     threshold: f64,
+    /// Where windows are drawn: the recording's span where there are events, seconds.
+    span: [f64; 2],
     /// Where poses are compared with the truth, and the truth there.
     eval_times: Vec<f64>,
     truth: Vec<Isometry3<f64>>,
@@ -582,6 +581,19 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         train.rays_per_step,
         train.windows_per_step,
     ));
+    let span = match rec.scene.events.time_span() {
+        Some((first, last)) => [
+            first.as_secs_f64().max(0.0),
+            last.as_secs_f64().min(rec.duration),
+        ],
+        None => bail!("the recording has no events"),
+    };
+    if span[0] >= span[1] {
+        bail!(
+            "no events within the views' time span [0, {}] s",
+            rec.duration
+        );
+    }
     let samples = exp.eval.pose_samples.max(2);
     let eval_times: Vec<f64> = (0..samples)
         .map(|i| (i as f64 + 0.5) * rec.duration / samples as f64)
@@ -597,6 +609,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         settings,
         iterations,
         threshold,
+        span,
         eval_times,
         truth,
     };
@@ -658,6 +671,7 @@ fn run_method(
         rays_per_step: train.rays_per_step,
         windows_per_step: train.windows_per_step,
         window_secs: train.window.map(|f| f * rec.duration),
+        time_span: Some(setup.span),
         neg_ratio: train.neg_ratio,
         loss: EventLoss {
             threshold: setup.threshold as f32,
@@ -727,7 +741,6 @@ fn run_method(
     let result = evaluate(
         setup,
         &tag,
-        condition.align,
         field.as_mut(),
         Paths {
             estimate: &estimate,
@@ -738,14 +751,12 @@ fn run_method(
         wall_s,
     )?;
     input.run_dir.log(format_args!(
-        "{tag}: rotation {:.3}°, translation {:.4} (max {:.4}){}, PSNR {}, SSIM {}, {:.0} s",
+        "{tag}: rotation {:.3}°, translation {:.4} (max {:.4}); aligned {:.3}°, {:.4}; PSNR {}, SSIM {}, {:.0} s",
         result.rot_err_deg,
         result.trans_err,
         result.max_trans_err,
-        match (result.rot_err_deg_aligned, result.trans_err_aligned) {
-            (Some(r), Some(t)) => format!("; aligned {r:.3}°, {t:.4}"),
-            _ => String::new(),
-        },
+        result.rot_err_deg_aligned,
+        result.trans_err_aligned,
         result
             .psnr_db
             .map_or("-".to_owned(), |p| format!("{p:.2} dB")),
@@ -792,7 +803,6 @@ struct Paths<'a> {
 fn evaluate(
     setup: &Setup<'_>,
     tag: &str,
-    align: bool,
     field: &mut dyn cpose_nerf::field3d::RadianceField,
     paths: Paths<'_>,
     final_loss: f64,
@@ -813,11 +823,7 @@ fn evaluate(
         own_pose,
     } = paths;
     let (rot_err_deg, trans_err, max_trans_err) = pose_errors(truth, estimate);
-    let aligned = if align {
-        Some(barf_pose_errors(truth, estimate, ReflectionFix::Kabsch)?)
-    } else {
-        None
-    };
+    let aligned = barf_pose_errors(truth, estimate, ReflectionFix::Kabsch)?;
     write_trajectory(input, &format!("traj_{tag}.txt"), times, estimate)?;
     trajectory_plot(480, truth, init, estimate)
         .save_png(input.run_dir.file(format!("trajectory_{tag}.png")))?;
@@ -829,10 +835,7 @@ fn evaluate(
         let renders: Vec<_> = held_out
             .iter()
             .map(|view| {
-                let pose = match &aligned {
-                    Some(a) => a.alignment.gt_to_learned(&view.world_from_camera),
-                    None => view.world_from_camera,
-                };
+                let pose = aligned.alignment.gt_to_learned(&view.world_from_camera);
                 render_view(
                     &mut renderer,
                     field,
@@ -882,8 +885,8 @@ fn evaluate(
         rot_err_deg,
         trans_err,
         max_trans_err,
-        rot_err_deg_aligned: aligned.as_ref().map(|a| a.rot_err_deg),
-        trans_err_aligned: aligned.as_ref().map(|a| a.trans_err),
+        rot_err_deg_aligned: aligned.rot_err_deg,
+        trans_err_aligned: aligned.trans_err,
         psnr_db,
         ssim: ssim_mean,
         final_loss,

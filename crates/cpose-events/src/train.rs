@@ -120,6 +120,9 @@ pub struct EventSchedule {
     pub windows_per_step: usize,
     /// Window lengths `[min, max]`, seconds.
     pub window_secs: [f64; 2],
+    /// Where windows are drawn, seconds (e.g. where the poses are known); `None`: the events'
+    /// time span.
+    pub time_span: Option<[f64; 2]>,
     /// Share of each window's rays drawn uniformly over the sensor (EventNeRF: 0.1).
     pub neg_ratio: f64,
     /// The loss' threshold and `ε`.
@@ -208,11 +211,13 @@ impl<'a> EventTrainer<'a> {
         let Some((first, last)) = events.time_span() else {
             bail!("no events to train on");
         };
-        let span = [0.0f64.min(first.as_secs_f64()), last.as_secs_f64()];
+        let span = schedule
+            .time_span
+            .unwrap_or([first.as_secs_f64(), last.as_secs_f64()]);
         let [w_min, w_max] = schedule.window_secs;
         if !(w_min > 0.0 && w_max >= w_min && w_max < span[1] - span[0]) {
             bail!(
-                "window lengths [{w_min}, {w_max}] s: need 0 < min ≤ max < the recording's {} s",
+                "window lengths [{w_min}, {w_max}] s: need 0 < min ≤ max < the {} s the windows are drawn from",
                 span[1] - span[0]
             );
         }
@@ -510,6 +515,7 @@ mod tests {
             rays_per_step: 256,
             windows_per_step: 4,
             window_secs: [0.05, 0.5],
+            time_span: None,
             neg_ratio: 0.1,
             loss: EventLoss {
                 threshold: 0.25,
