@@ -473,29 +473,8 @@ fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
 }
 
 fn posenet(input: &TaskInput, range: TimeRange) -> anyhow::Result<Box<dyn PoseField>> {
-    let section = input.config.section("posenet");
-    let mut config: PoseNetConfig = if section.exists()? {
-        section.decode_params()?
-    } else {
-        PoseNetConfig::default()
-    };
-    config.seed = config.seed.wrapping_add(input.run.seed);
+    let config = PoseNetConfig::from_section(&input.config.section("posenet"), input.run.seed)?;
     Ok(Box::new(config.init::<f32>(range)?))
-}
-
-fn field_config(input: &TaskInput) -> anyhow::Result<RadianceFieldConfig> {
-    let section = input.config.section("field");
-    let mut config = if section.exists()? {
-        section.decode::<RadianceFieldConfig>()?
-    } else {
-        RadianceFieldConfig::default()
-    };
-    let seed = input.run.seed;
-    match &mut config {
-        RadianceFieldConfig::Grid(c) => c.seed = c.seed.wrapping_add(seed),
-        RadianceFieldConfig::Mlp(c) => c.seed = c.seed.wrapping_add(seed),
-    }
-    Ok(config)
 }
 
 /// Everything the methods share in one run.
@@ -545,7 +524,7 @@ fn render_settings(r: &RenderConfig) -> anyhow::Result<(RenderSettings, SceneBou
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
-    let field = field_config(input)?;
+    let field = RadianceFieldConfig::from_section(&input.config.section("field"), input.run.seed)?;
     let (settings, bounds) = render_settings(&exp.render)?;
     let train = &exp.train;
     let threshold = train.threshold.unwrap_or(exp.simulation.threshold);
@@ -857,7 +836,8 @@ fn evaluate(
             s += ssim(&corrected, truth);
             if k < exp.eval.saved_views {
                 let (w, h) = (truth.width(), truth.height());
-                side_by_side(&corrected, truth)
+                corrected
+                    .beside(truth)
                     .save_png(input.run_dir.file(format!("view_{k}_{tag}.png")))?;
                 depth_image(w, h, &render.depth, &render.opacity, near, far)
                     .save_png(input.run_dir.file(format!("depth_{k}_{tag}.png")))?;
@@ -874,7 +854,9 @@ fn evaluate(
                 &pose,
                 4096,
             );
-            side_by_side(&correction.apply(&view.image), &truths[0])
+            correction
+                .apply(&view.image)
+                .beside(&truths[0])
                 .save_png(input.run_dir.file(format!("own_view_{tag}.png")))?;
         }
         let n = held_out.len() as f64;
@@ -892,17 +874,5 @@ fn evaluate(
         final_loss,
         iterations,
         wall_s,
-    })
-}
-
-/// `a | b` side by side.
-fn side_by_side(a: &Image, b: &Image) -> Image {
-    let (w, h) = (a.width(), a.height());
-    Image::from_fn(2 * w, h, |x, y| {
-        if x < w {
-            a.pixel(x, y)
-        } else {
-            b.pixel(x - w, y)
-        }
     })
 }

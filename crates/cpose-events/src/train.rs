@@ -530,6 +530,18 @@ mod tests {
         }
     }
 
+    /// The default hash grid in the sphere of radius 1.8 around the object.
+    fn field() -> Box<dyn RadianceField> {
+        let bounds = cpose_nerf::field3d::SceneBounds {
+            centre: [0.0; 3],
+            radius: 1.8,
+            unbounded: false,
+        };
+        cpose_nerf::field3d::RadianceFieldConfig::default()
+            .init::<f32>(bounds)
+            .unwrap()
+    }
+
     fn fixed_poses() -> FramePoses {
         let decay = ExponentialDecay {
             lr0: 0.0,
@@ -550,14 +562,7 @@ mod tests {
     fn training_on_true_poses_lowers_the_event_loss() {
         let (data, tt) = tiny();
         let initial = InitialPath::Turntable(tt);
-        let bounds = cpose_nerf::field3d::SceneBounds {
-            centre: [0.0; 3],
-            radius: 1.8,
-            unbounded: false,
-        };
-        let mut field = cpose_nerf::field3d::RadianceFieldConfig::default()
-            .init::<f32>(bounds)
-            .unwrap();
+        let mut field = field();
         let mut poses = fixed_poses();
         let steps = 300;
         let mut trainer = EventTrainer::new(
@@ -583,14 +588,7 @@ mod tests {
     fn bad_setups_are_errors() {
         let (data, tt) = tiny();
         let initial = InitialPath::Turntable(tt);
-        let bounds = cpose_nerf::field3d::SceneBounds {
-            centre: [0.0; 3],
-            radius: 1.8,
-            unbounded: false,
-        };
-        let mut field = cpose_nerf::field3d::RadianceFieldConfig::default()
-            .init::<f32>(bounds)
-            .unwrap();
+        let mut field = field();
         let mut poses = fixed_poses();
         let mut check = |events: &EventStream, camera: PinholeCamera, s: EventSchedule, what| {
             let err = EventTrainer::new(

@@ -155,6 +155,24 @@ impl Image {
         &self.data
     }
 
+    /// `self | other` side by side (the shorter padded with black below).
+    pub fn beside(&self, other: &Image) -> Image {
+        let (a, b) = (self, other);
+        let h = a.height().max(b.height());
+        Image::from_fn(a.width() + b.width(), h, |x, y| {
+            let (img, x) = if x < a.width() {
+                (a, x)
+            } else {
+                (b, x - a.width())
+            };
+            if y < img.height() {
+                img.pixel(x, y)
+            } else {
+                [0.0; 3]
+            }
+        })
+    }
+
     /// The normalised coordinate frame of an image of this size.
     pub fn frame(&self) -> NormalizedFrame {
         NormalizedFrame::new(self.width, self.height)

@@ -71,6 +71,21 @@ impl Default for PoseNetConfig {
 }
 
 impl PoseNetConfig {
+    /// The settings of a config table (defaults when it is absent), the seed offset by the
+    /// run's `seed`.
+    pub fn from_section(
+        section: &crate::Section<'_>,
+        seed: u64,
+    ) -> Result<Self, crate::ConfigError> {
+        let mut config: Self = if section.exists()? {
+            section.decode_params()?
+        } else {
+            Self::default()
+        };
+        config.seed = config.seed.wrapping_add(seed);
+        Ok(config)
+    }
+
     /// A PoseNet over `range` with freshly initialised weights: Xavier-uniform (gain 1, bias 0)
     /// for all layers but the last, `U(0, 1e-6)` weights and zero bias for the last; translation
     /// network first, then rotation, from one seeded generator.

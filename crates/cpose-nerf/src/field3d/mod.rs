@@ -229,6 +229,24 @@ impl Default for RadianceFieldConfig {
 }
 
 impl RadianceFieldConfig {
+    /// The field of a config table (default: the hash grid when the table is absent), its
+    /// seed offset by the run's `seed`.
+    pub fn from_section(
+        section: &cpose_core::Section<'_>,
+        seed: u64,
+    ) -> Result<Self, cpose_core::ConfigError> {
+        let mut config = if section.exists()? {
+            section.decode::<RadianceFieldConfig>()?
+        } else {
+            RadianceFieldConfig::default()
+        };
+        match &mut config {
+            RadianceFieldConfig::Grid(c) => c.seed = c.seed.wrapping_add(seed),
+            RadianceFieldConfig::Mlp(c) => c.seed = c.seed.wrapping_add(seed),
+        }
+        Ok(config)
+    }
+
     /// The field at progress 0 (validates the config and `scene`).
     pub fn init<S: Real>(
         &self,

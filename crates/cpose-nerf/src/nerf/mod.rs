@@ -46,7 +46,7 @@ use anyhow::{Context, bail};
 use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
-use cpose_core::{FieldContext, PoseField, PoseNetConfig, Section, TimeRange};
+use cpose_core::{FieldContext, PoseField, PoseNetConfig, TimeRange};
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -269,20 +269,6 @@ impl Default for EvalConfig {
             saved_views: 3,
         }
     }
-}
-
-/// The radiance field of `[field]` (default: the hash grid), its seed offset by the run's.
-fn field_config(section: &Section<'_>, seed: u64) -> anyhow::Result<RadianceFieldConfig> {
-    let mut config = if section.exists()? {
-        section.decode::<RadianceFieldConfig>()?
-    } else {
-        RadianceFieldConfig::default()
-    };
-    match &mut config {
-        RadianceFieldConfig::Grid(c) => c.seed = c.seed.wrapping_add(seed),
-        RadianceFieldConfig::Mlp(c) => c.seed = c.seed.wrapping_add(seed),
-    }
-    Ok(config)
 }
 
 /// Training and test views with their true poses, and how to render the scene.
@@ -596,13 +582,7 @@ fn correction(
     Ok(match method {
         Method::TruePoses | Method::Fixed => None,
         Method::Posenet => {
-            let section = input.config.section("posenet");
-            let mut config: PoseNetConfig = if section.exists()? {
-                section.decode_params()?
-            } else {
-                PoseNetConfig::default()
-            };
-            config.seed = config.seed.wrapping_add(seed);
+            let config = PoseNetConfig::from_section(&input.config.section("posenet"), seed)?;
             Some(Box::new(config.init::<f32>(range)?))
         }
         Method::Barf => Some(Box::new(cpose_core::DiscretePoses::<f32>::new(times)?)),
@@ -628,7 +608,8 @@ fn correction(
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
     let noise_section = input.config.section("noise");
-    let field_config = field_config(&input.config.section("field"), input.run.seed)?;
+    let field_config =
+        RadianceFieldConfig::from_section(&input.config.section("field"), input.run.seed)?;
     let views = match exp.data.source {
         Source::Synthetic => synthetic_views(&exp)?,
         _ => dataset_views(&exp)?,
@@ -907,7 +888,8 @@ fn evaluate(
         psnr += crate::image::psnr(view.image.data(), image.data());
         ssim_sum += ssim(&view.image, image);
         if k < exp.eval.saved_views {
-            side_by_side(&view.image, image)
+            view.image
+                .beside(image)
                 .save_png(input.run_dir.file(format!("view_{k}_{}.png", method.key())))?;
             eval::depth_image(
                 views.camera.width,
@@ -962,18 +944,6 @@ fn evaluate(
         final_loss,
         iterations,
         wall_s,
-    })
-}
-
-/// `a | b` side by side.
-fn side_by_side(a: &Image, b: &Image) -> Image {
-    let (w, h) = (a.width(), a.height());
-    Image::from_fn(2 * w, h, |x, y| {
-        if x < w {
-            a.pixel(x, y)
-        } else {
-            b.pixel(x - w, y)
-        }
     })
 }
 

@@ -594,7 +594,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     for (k, method, rendered, warps) in renders {
         let truth = &motions[k].params;
         let overlay = render::overlay(&study.image, &study.layout, truth, &warps);
-        let pair = render::side_by_side(&overlay, &rendered);
+        let pair = overlay.beside(&rendered);
         pair.save_png(input.run_dir.file(format!("{}_t{k:02}.png", method.key())))?;
     }
     for k in 0..study.render_trajectories.min(study.trajectories) {
@@ -679,24 +679,6 @@ pub mod render {
             }
         }
         out
-    }
-
-    /// `a` and `b` next to each other (heights padded with black).
-    pub fn side_by_side(a: &Image, b: &Image) -> Image {
-        let h = a.height().max(b.height());
-        Image::from_fn(a.width() + b.width(), h, |x, y| {
-            if x < a.width() {
-                if y < a.height() {
-                    a.pixel(x, y)
-                } else {
-                    [0.0; 3]
-                }
-            } else if y < b.height() {
-                b.pixel(x - a.width(), y)
-            } else {
-                [0.0; 3]
-            }
-        })
     }
 
     /// The ground-truth patches in a row, in time order, 2 pixels apart.
