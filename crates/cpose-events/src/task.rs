@@ -45,12 +45,12 @@ use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::{PoseField, PoseNetConfig, TimeRange};
 use cpose_nerf::camera::PinholeCamera;
-use cpose_nerf::field3d::{RadianceFieldConfig, SceneBounds};
+use cpose_nerf::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::{Image, psnr};
 use cpose_nerf::metrics::ssim;
 use cpose_nerf::nerf::eval::{depth_image, trajectory_plot};
 use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
-use cpose_nerf::nerf::render::{Clip, RenderSettings, Renderer, render_view};
+use cpose_nerf::nerf::render::{Clip, RenderSettings, Renderer, render_view_with};
 use cpose_nerf::scene::SyntheticScene;
 use cpose_nerf::volume::{LastInterval, Sampling};
 use nalgebra::Isometry3;
@@ -60,7 +60,7 @@ use crate::colour::ColourCorrection;
 use crate::eventnerf::{EventNerfOptions, EventNerfScene, read_eventnerf};
 use crate::loss::EventLoss;
 use crate::simulate::{SimulatorConfig, SyntheticEventsConfig, simulate_eventnerf_scene};
-use crate::train::{EventSchedule, EventTrainer, InitialPath, KeyedPoses};
+use crate::train::{EventSchedule, EventTrainer, InitialPath, KeyedPoses, pixel_directions};
 use crate::turntable::Turntable;
 
 inventory::submit! {
@@ -367,13 +367,11 @@ fn eventnerf_recording(exp: &Experiment) -> anyhow::Result<Recording> {
         ..EventNerfOptions::default()
     };
     let (scene, report) = read_eventnerf(path, &options)?;
-    let mut note = format!("{}: {report}", path.display());
-    if scene.distortion != [0.0; 2] {
-        note += &format!(
-            "; radial distortion {:?} is not modelled (pinhole rays)",
-            scene.distortion
-        );
-    }
+    let note = format!(
+        "{}: {report}; radial distortion {:?}",
+        path.display(),
+        scene.distortion
+    );
     let times: Vec<f64> = scene.view_times.iter().map(|t| t.as_secs_f64()).collect();
     let duration = times.last().copied().unwrap_or(0.0);
     let truth = KeyedPoses::new(times, scene.world_from_camera.clone())
@@ -672,7 +670,8 @@ fn run_method(
         setup.settings,
         schedule,
     )
-    .context("[train]")?;
+    .context("[train]")?
+    .with_distortion(rec.scene.distortion);
     // The last 100 losses, a ring.
     let mut recent = [0.0f64; 100];
     let mut saved = None;
@@ -782,7 +781,7 @@ struct Paths<'a> {
 fn evaluate(
     setup: &Setup<'_>,
     tag: &str,
-    field: &mut dyn cpose_nerf::field3d::RadianceField,
+    field: &mut dyn RadianceField,
     paths: Paths<'_>,
     final_loss: f64,
     wall_s: f64,
@@ -811,18 +810,20 @@ fn evaluate(
     let (mut psnr_db, mut ssim_mean) = (None, None);
     if !held_out.is_empty() {
         let mut renderer = Renderer::default();
+        // Through the recording's lens, as its held-out images were taken.
+        let camera = &rec.scene.camera;
+        let directions = pixel_directions(camera, rec.scene.distortion);
+        let size = (camera.width, camera.height);
+        let render =
+            |renderer: &mut Renderer, field: &mut dyn RadianceField, pose: Isometry3<f64>| {
+                let direction = |x, y| directions[y * size.0 + x];
+                render_view_with(renderer, field, &settings, size, direction, &pose, 4096)
+            };
         let renders: Vec<_> = held_out
             .iter()
             .map(|view| {
                 let pose = aligned.alignment.gt_to_learned(&view.world_from_camera);
-                render_view(
-                    &mut renderer,
-                    field,
-                    &settings,
-                    &rec.scene.camera,
-                    &pose,
-                    4096,
-                )
+                render(&mut renderer, field, pose)
             })
             .collect();
         let images: Vec<Image> = renders.iter().map(|r| r.image.clone()).collect();
@@ -846,14 +847,7 @@ fn evaluate(
         if let Some(pose) = own_pose {
             // What the method's own camera sees (a mis-calibrated path shows the object
             // off-centre), beside the true view.
-            let view = render_view(
-                &mut renderer,
-                field,
-                &settings,
-                &rec.scene.camera,
-                &pose,
-                4096,
-            );
+            let view = render(&mut renderer, field, pose);
             correction
                 .apply(&view.image)
                 .beside(&truths[0])

@@ -90,6 +90,22 @@ impl KeyedPoses {
     }
 }
 
+/// Camera-frame directions through every pixel centre of `camera` (row-major), with EventNeRF's
+/// radial undistortion: normalised coordinates `(x, y)` become `(x, y) / (1 + k1 r² + k2 r⁴)`,
+/// `r² = x² + y²`, at `z = 1`.
+pub fn pixel_directions(camera: &PinholeCamera, [k1, k2]: [f64; 2]) -> Vec<[f64; 3]> {
+    let mut out = Vec::with_capacity(camera.width * camera.height);
+    for y in 0..camera.height {
+        for x in 0..camera.width {
+            let [u, v, _] = camera.ray_direction_cam(x, y);
+            let r2 = u * u + v * v;
+            let f = 1.0 + k1 * r2 + k2 * r2 * r2;
+            out.push([u / f, v / f, 1.0]);
+        }
+    }
+    out
+}
+
 /// What is known of the camera path before training.
 #[derive(Clone, Debug, PartialEq)]
 pub enum InitialPath {
@@ -155,6 +171,8 @@ pub struct EventTrainer<'a> {
     anchors: Vec<(f64, Isometry3<f64>)>,
     events: &'a EventStream,
     camera: PinholeCamera,
+    /// Camera-frame direction of every pixel ([`pixel_directions`]).
+    directions: Vec<[f64; 3]>,
     settings: RenderSettings,
     schedule: EventSchedule,
     /// The recording's time span, seconds.
@@ -253,6 +271,7 @@ impl<'a> EventTrainer<'a> {
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
             frame: vec![0.0; pixels],
+            directions: pixel_directions(&camera, [0.0; 2]),
             field,
             poses,
             initial,
@@ -277,6 +296,12 @@ impl<'a> EventTrainer<'a> {
             pose_grads: Vec::new(),
             pose_cotangents: Vec::new(),
         })
+    }
+
+    /// Rays through a lens with EventNeRF's radial distortion `[k1, k2]` ([`pixel_directions`]).
+    pub fn with_distortion(mut self, distortion: [f64; 2]) -> Self {
+        self.directions = pixel_directions(&self.camera, distortion);
+        self
     }
 
     /// The poses being optimised (those of the last step's windows and anchors).
@@ -364,7 +389,7 @@ impl<'a> EventTrainer<'a> {
                     self.rng.random_range(0..w * h)
                 };
                 let (x, y) = (p % w, p / w);
-                let d_cam = self.camera.ray_direction_cam(x, y);
+                let d_cam = self.directions[p];
                 let current = self.poses.current();
                 self.rays
                     .push(CameraRay::new(2 * k, &current[2 * k], d_cam));
@@ -615,6 +640,21 @@ mod tests {
         let mut none = schedule(1);
         none.windows_per_step = 0;
         assert!(check(&data.events, data.camera, none, "no windows").contains("window"));
+    }
+
+    #[test]
+    fn pixel_directions_undistort_radially() {
+        let camera = PinholeCamera::centred(9, 7, 5.0);
+        let plain = pixel_directions(&camera, [0.0; 2]);
+        assert_eq!(plain[2 * 9 + 3], camera.ray_direction_cam(3, 2));
+        let (k1, k2) = (-0.2, 0.05);
+        let bent = pixel_directions(&camera, [k1, k2]);
+        for (p, b) in plain.iter().zip(&bent) {
+            let r2 = p[0] * p[0] + p[1] * p[1];
+            let f = 1.0 + k1 * r2 + k2 * r2 * r2;
+            assert!((b[0] * f - p[0]).abs() < 1e-15 && (b[1] * f - p[1]).abs() < 1e-15);
+            assert_eq!(b[2], 1.0);
+        }
     }
 
     #[test]

@@ -426,7 +426,28 @@ pub fn render_view<S: Real>(
     world_from_camera: &Isometry3<f64>,
     chunk: usize,
 ) -> RenderedView {
-    let (w, h) = (camera.width, camera.height);
+    render_view_with(
+        renderer,
+        field,
+        settings,
+        (camera.width, camera.height),
+        |x, y| camera.ray_direction_cam(x, y),
+        world_from_camera,
+        chunk,
+    )
+}
+
+/// [`render_view`] with each pixel's camera-frame direction from `direction(x, y)` (e.g. a
+/// lens with distortion).
+pub fn render_view_with<S: Real>(
+    renderer: &mut Renderer<S>,
+    field: &mut dyn RadianceField<S>,
+    settings: &RenderSettings,
+    (w, h): (usize, usize),
+    direction: impl Fn(usize, usize) -> [f64; 3],
+    world_from_camera: &Isometry3<f64>,
+    chunk: usize,
+) -> RenderedView {
     let mut rgb = vec![0.0f32; 3 * w * h];
     let mut depth = vec![0.0f32; w * h];
     let mut opacity = vec![0.0f32; w * h];
@@ -437,9 +458,7 @@ pub fn render_view<S: Real>(
         let end = (start + chunk).min(pixels);
         rays.clear();
         rays.extend(
-            (start..end).map(|p| {
-                CameraRay::new(0, world_from_camera, camera.ray_direction_cam(p % w, p / w))
-            }),
+            (start..end).map(|p| CameraRay::new(0, world_from_camera, direction(p % w, p / w))),
         );
         let out = renderer.forward(field, settings, &rays, None::<&mut rand_chacha::ChaCha8Rng>);
         for (i, o) in out.iter().enumerate() {
