@@ -89,6 +89,7 @@ fn bench(c: &mut Criterion) {
             ("mlp".to_owned(), [1e-3, 1e-4]),
         ]),
         anchor_weight: 1.0,
+        anchor_windows: 0.0,
         seed: 0,
     };
     let mut trainer = EventTrainer::new(

@@ -23,8 +23,8 @@
 //! rotation (°) and translation (scene units) error against the truth as they are, and after
 //! BARF's Procrustes alignment — a similarity, because events fix neither the scene's frame nor
 //! its scale: a scene scaled by `s` seen from a path scaled by `s` fires the same events, and
-//! known views pin the scale only where they are (measured: PoseNet recovers the circle, at the
-//! interpolated polygon's mean radius). Held-out views are rendered at the true poses mapped by
+//! known views pin the scale only through the windows that touch them (`train.anchor_windows`,
+//! [`crate::train`]). Held-out views are rendered at the true poses mapped by
 //! that alignment, as BARF evaluates, and scored with PSNR and SSIM after EventNeRF's colour
 //! correction ([`ColourCorrection`]).
 //!
@@ -237,6 +237,8 @@ struct TrainConfig {
     pose_warmup: f64,
     /// Weight of the anchor at the known views.
     anchor_weight: f64,
+    /// Share of the windows with one end at a known view.
+    anchor_windows: f64,
     checkpoint_every: usize,
     log_every: usize,
 }
@@ -260,6 +262,7 @@ impl Default for TrainConfig {
             posenet_lr_rotation: [2e-4, 2e-6],
             pose_warmup: 0.1,
             anchor_weight: 1.0,
+            anchor_windows: 0.0,
             checkpoint_every: 1000,
             log_every: 500,
         }
@@ -656,6 +659,7 @@ fn run_method(
         },
         field_lr: train.lr_field.clone(),
         anchor_weight: train.anchor_weight,
+        anchor_windows: train.anchor_windows,
         seed: input.run.seed,
     };
     let checkpoint = input.run_dir.file(format!("checkpoint_{tag}.bin"));
