@@ -631,14 +631,16 @@ fn run_method(
     } else {
         condition.initial.clone()
     };
-    let (correction, anchors) = match method {
+    let correction = match method {
         Method::Posenet => {
             let range = TimeRange::new(0.0, rec.duration)
                 .context("the recording needs a positive duration")?;
-            (Some(posenet(input, range)?), condition.anchors.clone())
+            Some(posenet(input, range)?)
         }
-        _ => (None, Vec::new()),
+        _ => None,
     };
+    // Every method draws the same windows (`anchor_windows` among them); the anchor term acts
+    // only on a correction.
     let schedules = PoseSchedules {
         rotation: decay(train.posenet_lr_rotation, iterations),
         translation: decay(train.posenet_lr_translation, iterations),
@@ -668,7 +670,7 @@ fn run_method(
         field.as_mut(),
         &mut poses,
         &initial,
-        anchors,
+        condition.anchors.clone(),
         &rec.scene.events,
         rec.scene.camera,
         setup.settings,
