@@ -25,15 +25,14 @@
 //! anchored poses and the radius came to 4.41 (translation error 0.20 → 0.11).
 
 use std::collections::BTreeMap;
-use std::ops::Range;
 
 use anyhow::bail;
 use cpose_core::Timestamp;
-use cpose_core::nn::{Adam, ExponentialDecay};
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
 use cpose_nerf::field3d::RadianceField;
 use cpose_nerf::nerf::poses::FramePoses;
 use cpose_nerf::nerf::render::{CameraRay, RenderSettings, Renderer};
+use cpose_nerf::nerf::train::FieldOptimizer;
 use cpose_nerf::volume::Composited;
 use nalgebra::{Isometry3, Quaternion, Translation3, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -187,8 +186,7 @@ pub struct EventTrainer<'a> {
     schedule: EventSchedule,
     /// The recording's time span, seconds.
     span: [f64; 2],
-    groups: Vec<(Range<usize>, ExponentialDecay)>,
-    adam: Adam<f32>,
+    optimizer: FieldOptimizer,
     rng: ChaCha8Rng,
     renderer: Renderer,
     /// The step's rays: every pair's start, then every pair's end.
@@ -264,25 +262,11 @@ impl<'a> EventTrainer<'a> {
                 bail!("{name} = {v} must lie in [0, 1]");
             }
         }
-        let mut groups = Vec::new();
-        for (name, range) in field.param_groups() {
-            let Some(&[lr0, lr_end]) = schedule.field_lr.get(name) else {
-                bail!("no learning rate for the field's parameter group {name:?}");
-            };
-            let max_iter = schedule.iterations;
-            groups.push((
-                range,
-                ExponentialDecay {
-                    lr0,
-                    lr_end,
-                    max_iter,
-                },
-            ));
-        }
+        let optimizer = FieldOptimizer::new(&*field, &schedule.field_lr, schedule.iterations)?;
         let n = field.num_params();
         let pixels = camera.width * camera.height;
         Ok(Self {
-            adam: Adam::new(n),
+            optimizer,
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
             frame: vec![0.0; pixels],
@@ -296,7 +280,6 @@ impl<'a> EventTrainer<'a> {
             settings,
             schedule,
             span,
-            groups,
             renderer: Renderer::default(),
             rays: Vec::new(),
             ends: Vec::new(),
@@ -476,16 +459,7 @@ impl<'a> EventTrainer<'a> {
             &mut self.grad_params,
             trainable.then_some(&mut self.pose_grads[..]),
         );
-        self.adam.begin_step();
-        let params = self.field.params_mut();
-        for (range, decay) in &self.groups {
-            self.adam.update(
-                range.start,
-                &mut params[range.clone()],
-                &self.grad_params[range.clone()],
-                decay.lr(it),
-            );
-        }
+        self.optimizer.step(&mut *self.field, &self.grad_params, it);
         let mut anchor = 0.0;
         if trainable {
             let current = self.poses.current();
@@ -529,6 +503,7 @@ impl<'a> EventTrainer<'a> {
 
 #[cfg(test)]
 mod tests {
+    use cpose_core::nn::ExponentialDecay;
     use nalgebra::UnitQuaternion;
 
     use super::*;

@@ -43,8 +43,7 @@ pub struct Trainer<'a> {
     camera: PinholeCamera,
     settings: RenderSettings,
     schedule: Schedule,
-    groups: Vec<(std::ops::Range<usize>, ExponentialDecay)>,
-    adam: Adam<f32>,
+    optimizer: FieldOptimizer,
     rng: ChaCha8Rng,
     /// A permutation of the pixel indices `0..w·h`, the state of [`draw_distinct`].
     pixels: Vec<usize>,
@@ -76,29 +75,10 @@ impl<'a> Trainer<'a> {
                 poses.times().len()
             );
         }
-        let mut groups = Vec::new();
-        for (name, range) in field.param_groups() {
-            let Some(&[lr0, lr_end]) = schedule.field_lr.get(name) else {
-                bail!(
-                    "no learning rate for the field's parameter group {name:?} (groups: {})",
-                    field
-                        .param_groups()
-                        .iter()
-                        .map(|(n, _)| *n)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-            };
-            let decay = ExponentialDecay {
-                lr0,
-                lr_end,
-                max_iter: schedule.iterations,
-            };
-            groups.push((range, decay));
-        }
+        let optimizer = FieldOptimizer::new(&*field, &schedule.field_lr, schedule.iterations)?;
         let n = field.num_params();
         Ok(Self {
-            adam: Adam::new(n),
+            optimizer,
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
             pixels: (0..camera.width * camera.height).collect(),
@@ -111,7 +91,6 @@ impl<'a> Trainer<'a> {
             camera,
             settings,
             schedule,
-            groups,
             renderer: Renderer::default(),
             rays: Vec::new(),
             targets: Vec::new(),
@@ -178,16 +157,7 @@ impl<'a> Trainer<'a> {
             &mut self.grad_params,
             trainable.then_some(&mut self.pose_grads[..]),
         );
-        self.adam.begin_step();
-        let params = self.field.params_mut();
-        for (range, decay) in &self.groups {
-            self.adam.update(
-                range.start,
-                &mut params[range.clone()],
-                &self.grad_params[range.clone()],
-                decay.lr(it),
-            );
-        }
+        self.optimizer.step(&mut *self.field, &self.grad_params, it);
         if trainable {
             self.pose_cotangents.clear();
             for (g, pose) in self.pose_grads.iter().zip(self.poses.current()) {
@@ -213,6 +183,61 @@ impl<'a> Trainer<'a> {
         self.last_checkpoint
             .as_ref()
             .map(|(path, iterations)| (path.as_path(), *iterations))
+    }
+}
+
+/// Adam over a radiance field's parameters with one exponentially decaying learning rate per
+/// parameter group (`[start, end]` over `iterations` steps).
+pub struct FieldOptimizer {
+    groups: Vec<(std::ops::Range<usize>, ExponentialDecay)>,
+    adam: Adam<f32>,
+}
+
+impl FieldOptimizer {
+    /// Errors naming the group when `field_lr` has no rate for one of the field's groups.
+    pub fn new(
+        field: &dyn RadianceField,
+        field_lr: &BTreeMap<String, [f64; 2]>,
+        iterations: u64,
+    ) -> anyhow::Result<Self> {
+        let mut groups = Vec::new();
+        for (name, range) in field.param_groups() {
+            let Some(&[lr0, lr_end]) = field_lr.get(name) else {
+                bail!(
+                    "no learning rate for the field's parameter group {name:?} (groups: {})",
+                    field
+                        .param_groups()
+                        .iter()
+                        .map(|(n, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            };
+            let decay = ExponentialDecay {
+                lr0,
+                lr_end,
+                max_iter: iterations,
+            };
+            groups.push((range, decay));
+        }
+        Ok(Self {
+            groups,
+            adam: Adam::new(field.num_params()),
+        })
+    }
+
+    /// One Adam step of every group from the gradient `grad` at iteration `it`.
+    pub fn step(&mut self, field: &mut dyn RadianceField, grad: &[f32], it: u64) {
+        self.adam.begin_step();
+        let params = field.params_mut();
+        for (range, decay) in &self.groups {
+            self.adam.update(
+                range.start,
+                &mut params[range.clone()],
+                &grad[range.clone()],
+                decay.lr(it),
+            );
+        }
     }
 }
 
