@@ -153,6 +153,32 @@ impl SceneBounds {
         Ok(())
     }
 
+    /// The bounds as seen through wrong camera poses. A camera posed at `initial_i` instead of
+    /// `truth_i` sees the scene moved by the rigid map `T_i = initial_i ∘ truth_i⁻¹`, which
+    /// takes the ball `B(c, r)` to `B(T_i(c), r)`; all of them lie in `B(c, r + max_i ‖T_i(c) −
+    /// c‖)`, the bounds returned. A field that starts from the initial poses must be able to
+    /// hold the scene wherever they put it. Unbounded (contracted) bounds are returned as they
+    /// are.
+    pub fn widened_for(
+        &self,
+        truth: &[nalgebra::Isometry3<f64>],
+        initial: &[nalgebra::Isometry3<f64>],
+    ) -> SceneBounds {
+        if self.unbounded {
+            return *self;
+        }
+        let c = nalgebra::Point3::from(self.centre);
+        let shift = truth
+            .iter()
+            .zip(initial)
+            .map(|(t, i)| ((i * t.inverse()) * c - c).norm())
+            .fold(0.0, f64::max);
+        SceneBounds {
+            radius: self.radius + shift,
+            ..*self
+        }
+    }
+
     /// Half the side of the cube of field coordinates the grids span: 1 (bounded) or 2
     /// (contracted).
     pub fn extent(&self) -> f64 {
@@ -681,6 +707,40 @@ mod test_support {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A camera shifted by `Δ` sees the scene shifted by `Δ`; one turned about the centre sees
+    /// it turned in place. The radius grows by the largest shift; contracted bounds stay.
+    #[test]
+    fn bounds_widen_by_the_largest_scene_shift_of_the_initial_poses() {
+        use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+        let bounds = SceneBounds {
+            centre: [1.0, 0.0, 0.0],
+            radius: 1.5,
+            unbounded: false,
+        };
+        let truth = [
+            Isometry3::translation(5.0, 0.0, 0.0),
+            Isometry3::translation(1.0, 4.0, 0.0),
+        ];
+        let about_centre = |t: &Isometry3<f64>| {
+            let c = Translation3::new(1.0, 0.0, 0.0);
+            c * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.7) * c.inverse() * t
+        };
+        let initial = [
+            about_centre(&truth[0]),
+            Translation3::new(0.0, 0.3, 0.4) * truth[1],
+        ];
+        let widened = bounds.widened_for(&truth, &initial);
+        assert!((widened.radius - 2.0).abs() < 1e-12, "{widened:?}");
+        assert_eq!(widened.centre, bounds.centre);
+        let turned_only = bounds.widened_for(&truth[..1], &initial[..1]);
+        assert!((turned_only.radius - 1.5).abs() < 1e-12);
+        let unbounded = SceneBounds {
+            unbounded: true,
+            ..bounds
+        };
+        assert_eq!(unbounded.widened_for(&truth, &initial), unbounded);
+    }
 
     /// Values: the identity inside the unit ball, radius `2 − 1/ρ` outside along `y`, and
     /// continuity on the unit sphere.
