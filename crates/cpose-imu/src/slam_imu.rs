@@ -1,7 +1,8 @@
 //! Task `slam_imu`: RGB-D neural SLAM with an IMU (paper §3.4, its EuRoC table and the
 //! supplement's IMU tables). Methods: NICE-SLAM's free pose (`baseline`), PoseNet relative to the
-//! previous camera without IMU (`prev`, task `slam`'s), and PoseNet with the IMU in tracking
-//! ([`crate::tracker`]) as `none`, `loose`, `tight`, `accel` or `combined`.
+//! previous camera without IMU (`prev`, task `slam`'s) and with the gyroscope tying its relative
+//! rotation (`prev_gyro`), and PoseNet with the IMU in tracking ([`crate::tracker`]) as `none`,
+//! `loose`, `tight`, `accel` or `combined`.
 //!
 //! Data, either
 //! * **`[euroc]`**: the synthetic room rendered along a real flight — a EuRoC sequence's ground
@@ -32,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::euroc::EurocSequence;
 use crate::imu::{ImuMode, ImuSample};
 use crate::sim::{NoiseModel, imu_from_poses};
-use crate::tracker::{ImuPoseNet, ImuTrackConfig};
+use crate::tracker::{ImuPoseNet, ImuTrackConfig, RelativeGyro};
 
 inventory::submit! {
     Task {
@@ -129,6 +130,9 @@ const ADIS16448: NoiseModel = NoiseModel {
 enum Method {
     Baseline,
     Prev,
+    /// `prev` with the gyroscope tying each frame's relative rotation ([`RelativeGyro`]).
+    #[serde(rename = "prev_gyro")]
+    PrevGyro,
     #[serde(untagged)]
     Imu(ImuMode),
 }
@@ -138,6 +142,7 @@ impl Method {
         match self {
             Method::Baseline => "baseline",
             Method::Prev => "prev",
+            Method::PrevGyro => "prev_gyro",
             Method::Imu(mode) => mode.key(),
         }
     }
@@ -364,8 +369,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
     if exp.slam.methods.is_empty() {
         bail!(
-            "slam.methods is empty: name at least one of baseline, prev, none, loose, tight, \
-             accel, combined"
+            "slam.methods is empty: name at least one of baseline, prev, prev_gyro, none, loose, \
+             tight, accel, combined"
         );
     }
     exp.imu.validate()?;
@@ -395,6 +400,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let (posenet, imu_config, seed) = (&exp.posenet, &exp.imu, input.run.seed);
     let (imu, gravity, pixels) = (&data.imu, data.gravity, setup.tracking.pixels);
     let (lr, factor) = (setup.tracking.lr, setup.tracking.rotation_lr_factor);
+    let frame_times = &seq.times();
     let methods: Vec<(String, ModelFactory)> = exp
         .slam
         .methods
@@ -408,6 +414,17 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     Ok(Box::new(PoseNetTracker::new(
                         posenet,
                         Reference::Previous,
+                        range,
+                        seed,
+                    )?) as _)
+                }),
+                Method::PrevGyro => Box::new(move || {
+                    Ok(Box::new(RelativeGyro::new(
+                        posenet,
+                        imu_config,
+                        imu.clone(),
+                        frame_times.clone(),
+                        pixels,
                         range,
                         seed,
                     )?) as _)
@@ -471,10 +488,14 @@ mod tests {
         struct M {
             m: Vec<Method>,
         }
-        let m: M = toml::from_str(r#"m = ["baseline", "prev", "none", "tight", "combined"]"#)
-            .expect("valid");
+        let m: M =
+            toml::from_str(r#"m = ["baseline", "prev", "prev_gyro", "none", "tight", "combined"]"#)
+                .expect("valid");
         let keys: Vec<&str> = m.m.iter().map(|m| m.key()).collect();
-        assert_eq!(keys, ["baseline", "prev", "none", "tight", "combined"]);
+        assert_eq!(
+            keys,
+            ["baseline", "prev", "prev_gyro", "none", "tight", "combined"]
+        );
         assert!(toml::from_str::<M>(r#"m = ["tite"]"#).is_err());
     }
 }

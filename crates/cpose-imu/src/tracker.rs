@@ -23,12 +23,19 @@
 //! Gyroscope losses: loose (the rotation integrated from `t_{i−1}` to `t_i`), tight (`q̇` at
 //! every reading); the accelerometer through `p̈` with the rotation taken as given
 //! ([`crate::losses`]).
+//!
+//! [`RelativeGyro`] is the other way in: task `slam`'s PoseNet relative to the previous camera,
+//! whose output is the motion since the previous frame rather than a function whose derivative
+//! the gyroscope measures, with the gyroscope's rotation over each frame interval tying that
+//! relative rotation (loose coupling in relative form, [`RotationIncrement`]).
 
 use anyhow::bail;
 use cpose_core::nn::Adam;
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
 use cpose_slam::checkpoint::{Reader, Writer};
-use cpose_slam::track::{PoseModel, PoseNetTrackConfig};
+use cpose_slam::track::{
+    PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference, RotationIncrement,
+};
 use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
@@ -432,6 +439,84 @@ impl PoseModel for ImuPoseNet {
     }
 }
 
+/// PoseNet relative to the previous camera ([`PoseNetTracker`]) with the gyroscope's rotation
+/// from the previous frame to this one, `Δq = Π Exp(ω Δt)`, tying its relative rotation with
+/// weight `λ_g P` (`imu.gyro_weight` per pixel) after `imu.predict_steps` steps on the tie alone.
+pub struct RelativeGyro {
+    tracker: PoseNetTracker,
+    /// Readings in the body frame, sorted by time (the frames' clock).
+    imu: Vec<ImuSample>,
+    /// The times of the frames, by index.
+    frame_times: Vec<f64>,
+    weight: f64,
+    predict_steps: usize,
+}
+
+impl RelativeGyro {
+    /// The tracker of `config` over `range` with the gyroscope of `imu` (`P = pixels`).
+    pub fn new(
+        config: &PoseNetTrackConfig,
+        imu_config: &ImuTrackConfig,
+        imu: Vec<ImuSample>,
+        frame_times: Vec<f64>,
+        pixels: usize,
+        range: TimeRange,
+        seed: u64,
+    ) -> anyhow::Result<Self> {
+        Ok(Self {
+            tracker: PoseNetTracker::new(config, Reference::Previous, range, seed)?,
+            imu,
+            frame_times,
+            weight: imu_config.gyro_weight * pixels as f64,
+            predict_steps: imu_config.predict_steps,
+        })
+    }
+}
+
+impl PoseModel for RelativeGyro {
+    fn begin(
+        &mut self,
+        index: usize,
+        time: f64,
+        history: &[Isometry3<f64>],
+    ) -> anyhow::Result<Isometry3<f64>> {
+        let previous = index
+            .checked_sub(1)
+            .and_then(|i| self.frame_times.get(i))
+            .copied();
+        let Some(rotation) = previous.and_then(|t0| losses::integrate_gyro(&self.imu, t0, time))
+        else {
+            bail!("the IMU readings do not cover frame {index} and the one before it");
+        };
+        self.tracker.set_increment(Some(RotationIncrement {
+            rotation,
+            weight: self.weight,
+            predict_steps: self.predict_steps,
+        }));
+        self.tracker.begin(index, time, history)
+    }
+
+    fn pose(&self) -> Isometry3<f64> {
+        self.tracker.pose()
+    }
+
+    fn step(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()> {
+        self.tracker.step(grad_q, grad_t)
+    }
+
+    fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        self.tracker.finish(index, time, pose)
+    }
+
+    fn save(&self, w: &mut Writer) {
+        self.tracker.save(w);
+    }
+
+    fn load(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        self.tracker.load(r)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -484,9 +569,9 @@ mod tests {
         Some((times, poses, imu))
     }
 
-    /// Mean rotation (degrees) and translation (metres) error of the start pose of every frame
-    /// when each earlier frame was tracked perfectly.
-    fn prediction_errors(mode: ImuMode, (times, poses, imu): &Flight) -> (f64, f64) {
+    /// [`start_errors`] of the IMU tracker in `mode`.
+    fn prediction_errors(mode: ImuMode, flight: &Flight) -> (f64, f64) {
+        let (times, _, imu) = flight;
         let config = PoseNetTrackConfig {
             network: PoseNetConfig {
                 activation: Activation::Softplus,
@@ -507,6 +592,12 @@ mod tests {
             0,
         )
         .unwrap();
+        start_errors(&mut model, flight)
+    }
+
+    /// Mean rotation (degrees) and translation (metres) error of the start pose of every frame
+    /// when each earlier frame was tracked perfectly.
+    fn start_errors(model: &mut dyn PoseModel, (times, poses, _): &Flight) -> (f64, f64) {
         let (mut rot, mut trans) = (0.0, 0.0);
         for i in 1..times.len() {
             let start = model.begin(i, times[i], &poses[..i]).unwrap();
@@ -545,6 +636,35 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The relative tracker too: with the gyroscope's increment its start turns as the flight
+    /// does, where its own extrapolation lags; the translation is left alone.
+    #[test]
+    fn the_gyro_increment_carries_the_relative_tracker() {
+        let Some(flight) = flight(10.0) else {
+            eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
+            return;
+        };
+        let (times, _, imu) = &flight;
+        let config = PoseNetTrackConfig::default();
+        let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
+        let mut prev = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
+        let mut gyro = RelativeGyro::new(
+            &config,
+            &ImuTrackConfig::default(),
+            imu.clone(),
+            times.clone(),
+            400,
+            range,
+            0,
+        )
+        .unwrap();
+        let without = start_errors(&mut prev, &flight);
+        let with = start_errors(&mut gyro, &flight);
+        eprintln!("prev {without:?}, prev_gyro {with:?}");
+        assert!(with.0 < 0.3 * without.0, "{without:?} → {with:?}");
+        assert!((with.1 - without.1).abs() < 1e-9, "{without:?} → {with:?}");
     }
 
     #[test]

@@ -10,7 +10,8 @@
 //!   network's weights are what tracking optimises, so it starts every frame from its own
 //!   prediction `PN(t_i)`. The best relative pose of every tracked frame is kept, and after each
 //!   frame PoseNet is re-fitted on that list (a batch of earlier frames plus the newest), so it
-//!   stays a consistent function of time.
+//!   stays a consistent function of time. A measured rotation increment (a gyroscope's, see
+//!   [`RotationIncrement`]) can tie the relative rotation of a frame.
 //!
 //! Both receive the gradient of the loss with respect to `world_from_camera` as raw partials
 //! `(∂L/∂q, ∂L/∂t)` ([`cpose_nerf::camera::PoseGradient::quaternion_translation`]).
@@ -215,6 +216,25 @@ pub struct PoseNetTracker {
     seed: u64,
     /// Drawn afresh for each frame from `seed` and its index (resumable runs).
     rng: ChaCha8Rng,
+    /// The rotation increment of the next frame ([`PoseNetTracker::set_increment`]).
+    increment: Option<RotationIncrement>,
+    /// The frame being tracked: the rotation its relative pose should have, and the weight.
+    prior: Option<(UnitQuaternion<f64>, f64)>,
+}
+
+/// A measured rotation from the previous pose to the one being tracked, `Δq = q_{i−1}* ⊗ q_i` —
+/// a gyroscope's integral over the frame interval, in the tracked (body) frame. It ties
+/// PoseNet's relative rotation by `λ |q_rel − s q̂_rel|₁`, where `q̂_rel = q_ref* ⊗ q_{i−1} ⊗ Δq`
+/// is what the relative rotation must be for `T_i = T_ref ∘ PN(t_i)` to turn by `Δq`, and `s = ±1`
+/// aligns the signs: the relative form of the paper's loose coupling (§3.4).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RotationIncrement {
+    /// `Δq`.
+    pub rotation: UnitQuaternion<f64>,
+    /// `λ`, in units of the tracking loss.
+    pub weight: f64,
+    /// Adam steps on the tie alone before tracking starts: the frame's start then turns by `Δq`.
+    pub predict_steps: usize,
 }
 
 impl PoseNetTracker {
@@ -244,7 +264,14 @@ impl PoseNetTracker {
             memory: Vec::new(),
             seed,
             rng: ChaCha8Rng::seed_from_u64(seed),
+            increment: None,
+            prior: None,
         })
+    }
+
+    /// The rotation increment of the next frame to begin (`None`: no tie); it is used once.
+    pub fn set_increment(&mut self, increment: Option<RotationIncrement>) {
+        self.increment = increment;
     }
 
     /// Evaluates the network at the current time.
@@ -335,6 +362,15 @@ impl PoseModel for PoseNetTracker {
         };
         self.time = time;
         self.evaluate()?;
+        self.prior = None;
+        if let Some(inc) = self.increment.take() {
+            let target =
+                self.current_ref.rotation.inverse() * history[index - 1].rotation * inc.rotation;
+            self.prior = Some((target, inc.weight));
+            for _ in 0..inc.predict_steps {
+                self.step_relative(&Quaternion::new(0.0, 0.0, 0.0, 0.0), &Vector3::zeros())?;
+            }
+        }
         Ok(self.pose())
     }
 
@@ -411,8 +447,13 @@ impl PoseNetTracker {
     /// One Adam step from the cotangent `(∂L/∂q, ∂L/∂t)` of the network's own output at the
     /// current time; re-evaluates it.
     fn step_relative(&mut self, gq: &Quaternion<f64>, gt: &Vector3<f64>) -> anyhow::Result<()> {
+        let mut gq = *gq;
+        if let Some((target, weight)) = self.prior {
+            // On the network's output at t_i (the last evaluation).
+            gq += rotation_tie(&self.batch.rotation[0], &target, weight).1;
+        }
         self.cotangent.reset(1, Order::Pose);
-        self.cotangent.rotation[0] = *gq;
+        self.cotangent.rotation[0] = gq;
         self.cotangent.translation[0] = *gt;
         self.grad.fill(0.0);
         self.net
@@ -434,6 +475,25 @@ impl PoseNetTracker {
         self.memory.push((time, relative));
         self.refit()
     }
+}
+
+/// `λ |q − s q̂|₁` with `s = ±1` the sign of `⟨q, q̂⟩`, and its gradient `λ sign(q − s q̂)` in `q`
+/// ([`RotationIncrement`]).
+fn rotation_tie(
+    q: &Quaternion<f64>,
+    target: &UnitQuaternion<f64>,
+    weight: f64,
+) -> (f64, Quaternion<f64>) {
+    let s = if q.coords.dot(&target.coords) < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let r = q - target.into_inner() * s;
+    (
+        weight * r.coords.abs().sum(),
+        Quaternion::from(r.coords.map(l1_subgradient)) * weight,
+    )
 }
 
 /// The rotation vector `ω = θ n` of a unit quaternion `q = (w, u)` with `w ≥ 0` and its Jacobian
@@ -839,6 +899,60 @@ mod tests {
                 "param {k}: {a} vs {numeric}"
             );
         }
+    }
+
+    #[test]
+    fn rotation_tie_matches_central_differences() {
+        let target = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.9);
+        for q in [
+            Quaternion::new(0.8, 0.1, -0.3, 0.4),
+            Quaternion::new(-0.5, 0.2, 0.4, -0.7),
+        ] {
+            let (_, g) = rotation_tie(&q, &target, 1.7);
+            for k in 0..4 {
+                let h = 1e-7;
+                let (mut a, mut b) = (q.coords, q.coords);
+                a[k] += h;
+                b[k] -= h;
+                let numeric = (rotation_tie(&Quaternion::from(a), &target, 1.7).0
+                    - rotation_tie(&Quaternion::from(b), &target, 1.7).0)
+                    / (2.0 * h);
+                assert!(
+                    (numeric - g.coords[k]).abs() < 1e-6,
+                    "{k}: {numeric} vs {g:?}"
+                );
+            }
+        }
+    }
+
+    /// With a measured increment and its prediction steps, the frame starts turned by it from the
+    /// previous pose; without, PoseNet (at the identity) predicts no turn.
+    #[test]
+    fn a_rotation_increment_turns_the_start_of_the_frame() {
+        let range = TimeRange::new(0.0, 1.0).unwrap();
+        let config = PoseNetTrackConfig::default();
+        let prev = Isometry3::from_parts(
+            Translation3::new(0.5, -1.0, 2.0),
+            UnitQuaternion::from_euler_angles(0.4, -0.3, 1.0),
+        );
+        let delta = UnitQuaternion::from_euler_angles(0.05, -0.08, 0.03);
+        let error = |increment: Option<RotationIncrement>| {
+            let mut tracker = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
+            tracker.set_increment(increment);
+            let start = tracker.begin(1, 0.4, &[prev]).unwrap();
+            start
+                .rotation
+                .angle_to(&(prev.rotation * delta))
+                .to_degrees()
+        };
+        let without = error(None);
+        let with = error(Some(RotationIncrement {
+            rotation: delta,
+            weight: 1.0,
+            predict_steps: 60,
+        }));
+        assert!(without > 5.0, "{without}°");
+        assert!(with < 0.1 * without, "{without}° → {with}°");
     }
 
     #[test]
