@@ -1,7 +1,7 @@
 //! Task `slam_imu`: RGB-D neural SLAM with an IMU (paper §3.4, its EuRoC table and the
 //! supplement's IMU tables). Methods: NICE-SLAM's free pose (`baseline`), PoseNet relative to the
-//! previous camera without IMU (`prev`, task `slam`'s) and with the gyroscope tying its relative
-//! rotation (`prev_gyro`), and PoseNet with the IMU in tracking ([`crate::tracker`]) as `none`,
+//! previous camera without IMU (`prev`, task `slam`'s) and with the IMU tying its relative
+//! rotation (`prev_gyro`) or pose (`prev_imu`), and PoseNet with the IMU in tracking ([`crate::tracker`]) as `none`,
 //! `loose`, `tight`, `accel` or `combined`.
 //!
 //! Data, either
@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 use crate::euroc::EurocSequence;
 use crate::imu::{ImuMode, ImuSample};
 use crate::sim::{NoiseModel, imu_from_poses};
-use crate::tracker::{ImuPoseNet, ImuTrackConfig, RelativeGyro};
+use crate::tracker::{ImuPoseNet, ImuTrackConfig, RelativeImu};
 
 inventory::submit! {
     Task {
@@ -130,9 +130,12 @@ const ADIS16448: NoiseModel = NoiseModel {
 enum Method {
     Baseline,
     Prev,
-    /// `prev` with the gyroscope tying each frame's relative rotation ([`RelativeGyro`]).
+    /// `prev` with the gyroscope tying each frame's relative rotation ([`RelativeImu`]).
     #[serde(rename = "prev_gyro")]
     PrevGyro,
+    /// `prev_gyro` with the accelerometer tying its relative translation too.
+    #[serde(rename = "prev_imu")]
+    PrevImu,
     #[serde(untagged)]
     Imu(ImuMode),
 }
@@ -143,6 +146,7 @@ impl Method {
             Method::Baseline => "baseline",
             Method::Prev => "prev",
             Method::PrevGyro => "prev_gyro",
+            Method::PrevImu => "prev_imu",
             Method::Imu(mode) => mode.key(),
         }
     }
@@ -369,8 +373,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
     if exp.slam.methods.is_empty() {
         bail!(
-            "slam.methods is empty: name at least one of baseline, prev, prev_gyro, none, loose, \
-             tight, accel, combined"
+            "slam.methods is empty: name at least one of baseline, prev, prev_gyro, prev_imu, \
+             none, loose, tight, accel, combined"
         );
     }
     exp.imu.validate()?;
@@ -418,11 +422,13 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         seed,
                     )?) as _)
                 }),
-                Method::PrevGyro => Box::new(move || {
-                    Ok(Box::new(RelativeGyro::new(
+                Method::PrevGyro | Method::PrevImu => Box::new(move || {
+                    Ok(Box::new(RelativeImu::new(
                         posenet,
                         imu_config,
+                        method == Method::PrevImu,
                         imu.clone(),
+                        gravity,
                         frame_times.clone(),
                         pixels,
                         range,
@@ -488,13 +494,22 @@ mod tests {
         struct M {
             m: Vec<Method>,
         }
-        let m: M =
-            toml::from_str(r#"m = ["baseline", "prev", "prev_gyro", "none", "tight", "combined"]"#)
-                .expect("valid");
+        let m: M = toml::from_str(
+            r#"m = ["baseline", "prev", "prev_gyro", "prev_imu", "none", "tight", "combined"]"#,
+        )
+        .expect("valid");
         let keys: Vec<&str> = m.m.iter().map(|m| m.key()).collect();
         assert_eq!(
             keys,
-            ["baseline", "prev", "prev_gyro", "none", "tight", "combined"]
+            [
+                "baseline",
+                "prev",
+                "prev_gyro",
+                "prev_imu",
+                "none",
+                "tight",
+                "combined"
+            ]
         );
         assert!(toml::from_str::<M>(r#"m = ["tite"]"#).is_err());
     }

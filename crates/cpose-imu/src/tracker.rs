@@ -24,17 +24,17 @@
 //! every reading); the accelerometer through `p̈` with the rotation taken as given
 //! ([`crate::losses`]).
 //!
-//! [`RelativeGyro`] is the other way in: task `slam`'s PoseNet relative to the previous camera,
+//! [`RelativeImu`] is the other way in: task `slam`'s PoseNet relative to the previous camera,
 //! whose output is the motion since the previous frame rather than a function whose derivative
-//! the gyroscope measures, with the gyroscope's rotation over each frame interval tying that
-//! relative rotation (loose coupling in relative form, [`RotationIncrement`]).
+//! the IMU measures, with the IMU's motion over each frame interval tying that relative motion
+//! (loose coupling in relative form, [`MotionIncrement`]).
 
 use anyhow::bail;
 use cpose_core::nn::Adam;
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
 use cpose_slam::checkpoint::{Reader, Writer};
 use cpose_slam::track::{
-    PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference, RotationIncrement,
+    MotionIncrement, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference,
 };
 use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 use rand::SeedableRng;
@@ -439,25 +439,34 @@ impl PoseModel for ImuPoseNet {
     }
 }
 
-/// PoseNet relative to the previous camera ([`PoseNetTracker`]) with the gyroscope's rotation
-/// from the previous frame to this one, `Δq = Π Exp(ω Δt)`, tying its relative rotation with
-/// weight `λ_g P` (`imu.gyro_weight` per pixel) after `imu.predict_steps` steps on the tie alone.
-pub struct RelativeGyro {
+/// PoseNet relative to the previous camera ([`PoseNetTracker`]) tied to the IMU's motion from the
+/// previous frame to this one ([`MotionIncrement`]): the gyroscope's rotation `Δq = Π Exp(ω Δt)`
+/// with weight `λ_g P` (`imu.gyro_weight` per pixel) and, with `accel`, the accelerometer's
+/// displacement ([`accelerometer_displacement`]) with weight `λ_a P` per [`HOLD_METRES`];
+/// `imu.predict_steps` steps on the ties alone start each frame.
+pub struct RelativeImu {
     tracker: PoseNetTracker,
     /// Readings in the body frame, sorted by time (the frames' clock).
     imu: Vec<ImuSample>,
+    gravity_world: Vector3<f64>,
     /// The times of the frames, by index.
     frame_times: Vec<f64>,
-    weight: f64,
+    accel: bool,
+    gyro_weight: f64,
+    accel_weight: f64,
     predict_steps: usize,
 }
 
-impl RelativeGyro {
-    /// The tracker of `config` over `range` with the gyroscope of `imu` (`P = pixels`).
+impl RelativeImu {
+    /// The tracker of `config` over `range` with the gyroscope of `imu` and, if `accel`, its
+    /// accelerometer (gravity `gravity_world`; `P = pixels`).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         config: &PoseNetTrackConfig,
         imu_config: &ImuTrackConfig,
+        accel: bool,
         imu: Vec<ImuSample>,
+        gravity_world: Vector3<f64>,
         frame_times: Vec<f64>,
         pixels: usize,
         range: TimeRange,
@@ -466,31 +475,106 @@ impl RelativeGyro {
         Ok(Self {
             tracker: PoseNetTracker::new(config, Reference::Previous, range, seed)?,
             imu,
+            gravity_world,
             frame_times,
-            weight: imu_config.gyro_weight * pixels as f64,
+            accel,
+            gyro_weight: imu_config.gyro_weight * pixels as f64,
+            accel_weight: imu_config.accel_weight * pixels as f64 / HOLD_METRES,
             predict_steps: imu_config.predict_steps,
         })
     }
 }
 
-impl PoseModel for RelativeGyro {
+/// The displacement `R_1ᵀ (p(t_2) − p_1)` the accelerometer predicts, in the body frame at `t_1`,
+/// from the poses `(t_0, T_0)` and `(t_1, T_1)`, `t_0 < t_1 < t_2`, and the readings over
+/// `[t_0, t_2]`. With the world acceleration `a = R f + g` (the rotation carried from each pose
+/// by the gyroscope): `v_1 = (p_1 − p_0 + ∫_{t_0}^{t_1} (s − t_0) a ds) / (t_1 − t_0)` and
+/// `p(t_2) − p_1 = v_1 (t_2 − t_1) + ∫_{t_1}^{t_2} (t_2 − s) a ds`. `None` if the readings do not
+/// cover `[t_0, t_2]` or the times are out of order.
+pub fn accelerometer_displacement(
+    imu: &[ImuSample],
+    gravity_world: &Vector3<f64>,
+    (t0, pose0): (f64, &Isometry3<f64>),
+    (t1, pose1): (f64, &Isometry3<f64>),
+    t2: f64,
+) -> Option<Vector3<f64>> {
+    if !(t0 < t1 && t1 < t2) {
+        return None;
+    }
+    let before = weighted_acceleration(imu, gravity_world, pose0.rotation, t0, t1, |s| s - t0)?;
+    let after = weighted_acceleration(imu, gravity_world, pose1.rotation, t1, t2, |s| t2 - s)?;
+    let v1 = (pose1.translation.vector - pose0.translation.vector + before) / (t1 - t0);
+    Some(pose1.rotation.inverse() * (v1 * (t2 - t1) + after))
+}
+
+/// `∫_{lo}^{hi} w(s) (R(s) f(s) + g) ds` with `R(lo) = r` carried by the gyroscope, by the
+/// midpoint rule on the readings' intervals (each at the mean of its two readings).
+fn weighted_acceleration(
+    imu: &[ImuSample],
+    gravity_world: &Vector3<f64>,
+    mut r: UnitQuaternion<f64>,
+    lo: f64,
+    hi: f64,
+    w: impl Fn(f64) -> f64,
+) -> Option<Vector3<f64>> {
+    let (first, last) = (imu.first()?, imu.last()?);
+    if !(first.t_secs <= lo && hi <= last.t_secs) {
+        return None;
+    }
+    let start = imu.partition_point(|s| s.t_secs <= lo).max(1) - 1;
+    let mut sum = Vector3::zeros();
+    for pair in imu[start..].windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        if a.t_secs >= hi {
+            break;
+        }
+        let (from, to) = (a.t_secs.max(lo), b.t_secs.min(hi));
+        if to <= from {
+            continue;
+        }
+        let dt = to - from;
+        let omega = (a.gyro + b.gyro) * 0.5;
+        let mid = r * UnitQuaternion::from_scaled_axis(omega * (0.5 * dt));
+        let acceleration = mid * ((a.accel + b.accel) * 0.5) + gravity_world;
+        sum += acceleration * (w(0.5 * (from + to)) * dt);
+        r *= UnitQuaternion::from_scaled_axis(omega * dt);
+    }
+    Some(sum)
+}
+
+impl PoseModel for RelativeImu {
     fn begin(
         &mut self,
         index: usize,
         time: f64,
         history: &[Isometry3<f64>],
     ) -> anyhow::Result<Isometry3<f64>> {
-        let previous = index
-            .checked_sub(1)
-            .and_then(|i| self.frame_times.get(i))
-            .copied();
-        let Some(rotation) = previous.and_then(|t0| losses::integrate_gyro(&self.imu, t0, time))
-        else {
-            bail!("the IMU readings do not cover frame {index} and the one before it");
+        let times = &self.frame_times;
+        let uncovered = || {
+            anyhow::anyhow!("the IMU readings do not cover frame {index} and the ones before it")
         };
-        self.tracker.set_increment(Some(RotationIncrement {
+        let previous = index.checked_sub(1).and_then(|i| times.get(i)).copied();
+        let rotation = previous
+            .and_then(|t0| losses::integrate_gyro(&self.imu, t0, time))
+            .ok_or_else(uncovered)?;
+        let translation = match index.checked_sub(2) {
+            Some(i) if self.accel => {
+                let dp = accelerometer_displacement(
+                    &self.imu,
+                    &self.gravity_world,
+                    (times[i], &history[i]),
+                    (times[i + 1], &history[i + 1]),
+                    time,
+                )
+                .ok_or_else(uncovered)?;
+                Some((dp, self.accel_weight))
+            }
+            _ => None,
+        };
+        self.tracker.set_increment(Some(MotionIncrement {
             rotation,
-            weight: self.weight,
+            rotation_weight: self.gyro_weight,
+            translation,
             predict_steps: self.predict_steps,
         }));
         self.tracker.begin(index, time, history)
@@ -650,21 +734,58 @@ mod tests {
         let config = PoseNetTrackConfig::default();
         let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
         let mut prev = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
-        let mut gyro = RelativeGyro::new(
-            &config,
-            &ImuTrackConfig::default(),
-            imu.clone(),
-            times.clone(),
-            400,
-            range,
-            0,
-        )
-        .unwrap();
+        let relative = |accel| {
+            RelativeImu::new(
+                &config,
+                &ImuTrackConfig::default(),
+                accel,
+                imu.clone(),
+                gravity_world(),
+                times.clone(),
+                400,
+                range,
+                0,
+            )
+            .unwrap()
+        };
         let without = start_errors(&mut prev, &flight);
-        let with = start_errors(&mut gyro, &flight);
-        eprintln!("prev {without:?}, prev_gyro {with:?}");
-        assert!(with.0 < 0.3 * without.0, "{without:?} → {with:?}");
-        assert!((with.1 - without.1).abs() < 1e-9, "{without:?} → {with:?}");
+        let gyro = start_errors(&mut relative(false), &flight);
+        let both = start_errors(&mut relative(true), &flight);
+        eprintln!("prev {without:?}, prev_gyro {gyro:?}, prev_imu {both:?}");
+        assert!(gyro.0 < 0.3 * without.0, "{without:?} → {gyro:?}");
+        assert!((gyro.1 - without.1).abs() < 1e-9, "{without:?} → {gyro:?}");
+        assert!(both.1 < 0.5 * without.1, "{without:?} → {both:?}");
+    }
+
+    /// The accelerometer's displacement on an exact IMU of a known motion: a constant body rate
+    /// and a smooth path.
+    #[test]
+    fn accelerometer_displacement_matches_the_motion() {
+        let omega = Vector3::new(0.3, -0.2, 0.5);
+        let g = Vector3::new(0.0, 0.0, -9.81);
+        let pose = |t: f64| {
+            Isometry3::from_parts(
+                Vector3::new((2.0 * t).sin() * 0.5, 0.3 * t * t, 0.2 * (3.0 * t).cos()).into(),
+                UnitQuaternion::from_scaled_axis(omega * t),
+            )
+        };
+        let acceleration =
+            |t: f64| Vector3::new(-2.0 * (2.0 * t).sin(), 0.6, -1.8 * (3.0 * t).cos());
+        let imu: Vec<ImuSample> = (0..=400)
+            .map(|k| {
+                let t = k as f64 * 1e-3;
+                ImuSample {
+                    t_secs: t,
+                    gyro: omega,
+                    accel: pose(t).rotation.inverse() * (acceleration(t) - g),
+                }
+            })
+            .collect();
+        let (p0, p1, p2) = (pose(0.1), pose(0.2), pose(0.3));
+        let dp = accelerometer_displacement(&imu, &g, (0.1, &p0), (0.2, &p1), 0.3).unwrap();
+        let truth = p1.rotation.inverse() * (p2.translation.vector - p1.translation.vector);
+        assert!((dp - truth).norm() < 1e-5, "{dp} vs {truth}");
+        assert!(accelerometer_displacement(&imu, &g, (0.1, &p0), (0.2, &p1), 0.5).is_none());
     }
 
     #[test]

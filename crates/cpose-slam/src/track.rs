@@ -10,8 +10,8 @@
 //!   network's weights are what tracking optimises, so it starts every frame from its own
 //!   prediction `PN(t_i)`. The best relative pose of every tracked frame is kept, and after each
 //!   frame PoseNet is re-fitted on that list (a batch of earlier frames plus the newest), so it
-//!   stays a consistent function of time. A measured rotation increment (a gyroscope's, see
-//!   [`RotationIncrement`]) can tie the relative rotation of a frame.
+//!   stays a consistent function of time. A measured motion increment (an IMU's, see
+//!   [`MotionIncrement`]) can tie the relative pose of a frame.
 //!
 //! Both receive the gradient of the loss with respect to `world_from_camera` as raw partials
 //! `(∂L/∂q, ∂L/∂t)` ([`cpose_nerf::camera::PoseGradient::quaternion_translation`]).
@@ -216,25 +216,35 @@ pub struct PoseNetTracker {
     seed: u64,
     /// Drawn afresh for each frame from `seed` and its index (resumable runs).
     rng: ChaCha8Rng,
-    /// The rotation increment of the next frame ([`PoseNetTracker::set_increment`]).
-    increment: Option<RotationIncrement>,
-    /// The frame being tracked: the rotation its relative pose should have, and the weight.
-    prior: Option<(UnitQuaternion<f64>, f64)>,
+    /// The measured increment of the next frame ([`PoseNetTracker::set_increment`]).
+    increment: Option<MotionIncrement>,
+    /// The frame being tracked: what its relative pose should be, and the weights.
+    prior: Option<RelativePrior>,
 }
 
-/// A measured rotation from the previous pose to the one being tracked, `Δq = q_{i−1}* ⊗ q_i` —
-/// a gyroscope's integral over the frame interval, in the tracked (body) frame. It ties
-/// PoseNet's relative rotation by `λ |q_rel − s q̂_rel|₁`, where `q̂_rel = q_ref* ⊗ q_{i−1} ⊗ Δq`
-/// is what the relative rotation must be for `T_i = T_ref ∘ PN(t_i)` to turn by `Δq`, and `s = ±1`
-/// aligns the signs: the relative form of the paper's loose coupling (§3.4).
+/// A measured motion from the previous pose `T_{i−1}` to the one being tracked — an IMU's
+/// integrals over the frame interval, in the tracked (body) frame. It ties PoseNet's relative
+/// pose `PN(t_i)` to `T̂_rel = T_ref⁻¹ T_{i−1} ΔT`, what it must be for `T_i = T_ref ∘ PN(t_i)`
+/// to move by `ΔT`: `λ_R |q_rel − s q̂_rel|₁ + λ_p ‖t_rel − t̂_rel‖₁`, with `s = ±1` aligning the
+/// signs — the relative form of the paper's loose coupling (§3.4).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RotationIncrement {
-    /// `Δq`.
+pub struct MotionIncrement {
+    /// `Δq = q_{i−1}* ⊗ q_i`.
     pub rotation: UnitQuaternion<f64>,
-    /// `λ`, in units of the tracking loss.
-    pub weight: f64,
-    /// Adam steps on the tie alone before tracking starts: the frame's start then turns by `Δq`.
+    /// `λ_R`, in units of the tracking loss.
+    pub rotation_weight: f64,
+    /// `Δp = R_{i−1}ᵀ (p_i − p_{i−1})` and `λ_p` (per metre), if measured.
+    pub translation: Option<(Vector3<f64>, f64)>,
+    /// Adam steps on the ties alone before tracking starts: the frame then starts moved by them.
     pub predict_steps: usize,
+}
+
+/// [`MotionIncrement`] in the network's output: the targets and weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct RelativePrior {
+    rotation: UnitQuaternion<f64>,
+    rotation_weight: f64,
+    translation: Option<(Vector3<f64>, f64)>,
 }
 
 impl PoseNetTracker {
@@ -269,8 +279,8 @@ impl PoseNetTracker {
         })
     }
 
-    /// The rotation increment of the next frame to begin (`None`: no tie); it is used once.
-    pub fn set_increment(&mut self, increment: Option<RotationIncrement>) {
+    /// The measured increment of the next frame to begin (`None`: no tie); it is used once.
+    pub fn set_increment(&mut self, increment: Option<MotionIncrement>) {
         self.increment = increment;
     }
 
@@ -364,9 +374,20 @@ impl PoseModel for PoseNetTracker {
         self.evaluate()?;
         self.prior = None;
         if let Some(inc) = self.increment.take() {
-            let target =
-                self.current_ref.rotation.inverse() * history[index - 1].rotation * inc.rotation;
-            self.prior = Some((target, inc.weight));
+            let previous = &history[index - 1];
+            let reference = self.current_ref.inverse();
+            let translation = inc.translation.map(|(dp, weight)| {
+                let p = previous.translation.vector + previous.rotation * dp;
+                (
+                    reference.rotation * p + reference.translation.vector,
+                    weight,
+                )
+            });
+            self.prior = Some(RelativePrior {
+                rotation: reference.rotation * previous.rotation * inc.rotation,
+                rotation_weight: inc.rotation_weight,
+                translation,
+            });
             for _ in 0..inc.predict_steps {
                 self.step_relative(&Quaternion::new(0.0, 0.0, 0.0, 0.0), &Vector3::zeros())?;
             }
@@ -447,14 +468,22 @@ impl PoseNetTracker {
     /// One Adam step from the cotangent `(∂L/∂q, ∂L/∂t)` of the network's own output at the
     /// current time; re-evaluates it.
     fn step_relative(&mut self, gq: &Quaternion<f64>, gt: &Vector3<f64>) -> anyhow::Result<()> {
-        let mut gq = *gq;
-        if let Some((target, weight)) = self.prior {
+        let (mut gq, mut gt) = (*gq, *gt);
+        if let Some(prior) = self.prior {
             // On the network's output at t_i (the last evaluation).
-            gq += rotation_tie(&self.batch.rotation[0], &target, weight).1;
+            gq += rotation_tie(
+                &self.batch.rotation[0],
+                &prior.rotation,
+                prior.rotation_weight,
+            )
+            .1;
+            if let Some((target, weight)) = prior.translation {
+                gt += (self.batch.translation[0] - target).map(l1_subgradient) * weight;
+            }
         }
         self.cotangent.reset(1, Order::Pose);
         self.cotangent.rotation[0] = gq;
-        self.cotangent.translation[0] = *gt;
+        self.cotangent.translation[0] = gt;
         self.grad.fill(0.0);
         self.net
             .backward(&[self.time], &self.cotangent, &mut self.grad)?;
@@ -478,7 +507,7 @@ impl PoseNetTracker {
 }
 
 /// `λ |q − s q̂|₁` with `s = ±1` the sign of `⟨q, q̂⟩`, and its gradient `λ sign(q − s q̂)` in `q`
-/// ([`RotationIncrement`]).
+/// ([`MotionIncrement`]).
 fn rotation_tie(
     q: &Quaternion<f64>,
     target: &UnitQuaternion<f64>,
@@ -925,34 +954,50 @@ mod tests {
         }
     }
 
-    /// With a measured increment and its prediction steps, the frame starts turned by it from the
-    /// previous pose; without, PoseNet (at the identity) predicts no turn.
+    /// With a measured increment and its prediction steps, the frame starts moved by it from the
+    /// previous pose; without, PoseNet (at the identity) predicts no motion.
     #[test]
-    fn a_rotation_increment_turns_the_start_of_the_frame() {
+    fn a_motion_increment_moves_the_start_of_the_frame() {
         let range = TimeRange::new(0.0, 1.0).unwrap();
         let config = PoseNetTrackConfig::default();
         let prev = Isometry3::from_parts(
             Translation3::new(0.5, -1.0, 2.0),
             UnitQuaternion::from_euler_angles(0.4, -0.3, 1.0),
         );
-        let delta = UnitQuaternion::from_euler_angles(0.05, -0.08, 0.03);
-        let error = |increment: Option<RotationIncrement>| {
+        let delta = Isometry3::from_parts(
+            Translation3::new(0.04, -0.03, 0.02),
+            UnitQuaternion::from_euler_angles(0.05, -0.08, 0.03),
+        );
+        let truth = prev * delta;
+        let errors = |increment: Option<MotionIncrement>| {
             let mut tracker = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
             tracker.set_increment(increment);
             let start = tracker.begin(1, 0.4, &[prev]).unwrap();
-            start
-                .rotation
-                .angle_to(&(prev.rotation * delta))
-                .to_degrees()
+            (
+                start.rotation.angle_to(&truth.rotation).to_degrees(),
+                (start.translation.vector - truth.translation.vector).norm(),
+            )
         };
-        let without = error(None);
-        let with = error(Some(RotationIncrement {
-            rotation: delta,
-            weight: 1.0,
+        let without = errors(None);
+        let increment = MotionIncrement {
+            rotation: delta.rotation,
+            rotation_weight: 1.0,
+            translation: None,
             predict_steps: 60,
+        };
+        let turned = errors(Some(increment));
+        let moved = errors(Some(MotionIncrement {
+            translation: Some((delta.translation.vector, 1.0)),
+            ..increment
         }));
-        assert!(without > 5.0, "{without}°");
-        assert!(with < 0.1 * without, "{without}° → {with}°");
+        assert!(without.0 > 5.0 && without.1 > 0.05, "{without:?}");
+        assert!(turned.0 < 0.1 * without.0, "{without:?} → {turned:?}");
+        // The rotation tie alone leaves the translation network where it was.
+        assert!(
+            (turned.1 - without.1).abs() < 1e-9,
+            "{without:?} → {turned:?}"
+        );
+        assert!(moved.1 < 0.1 * without.1, "{without:?} → {moved:?}");
     }
 
     #[test]
