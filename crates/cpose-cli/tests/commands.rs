@@ -657,8 +657,11 @@ fn slam_imu_runs_on_simulated_and_real_imu() {
         (
             "configs/euroc_v102_imu.toml",
             "imu-euroc",
-            vec!["synthetic.frames=6", "slam.methods=[\"loose\", \"accel\"]"],
-            vec!["loose", "accel"],
+            vec![
+                "synthetic.frames=6",
+                "slam.methods=[\"loose\", \"accel\", \"prev_imu\"]",
+            ],
+            vec!["loose", "accel", "prev_imu"],
         ),
     ];
     for (config, name, sets, keys) in cases {
