@@ -562,11 +562,12 @@ impl PoseModel for RelativeImu {
             .ok_or_else(uncovered)?;
         let translation = match index.checked_sub(2) {
             Some(i) if self.accel => {
+                let (t0, t1) = times.get(i).zip(times.get(i + 1)).ok_or_else(uncovered)?;
                 let dp = accelerometer_displacement(
                     &self.imu,
                     &self.gravity_world,
-                    (times[i], &history[i]),
-                    (times[i + 1], &history[i + 1]),
+                    (*t0, &history[i]),
+                    (*t1, &history[i + 1]),
                     time,
                 )
                 .ok_or_else(uncovered)?;
@@ -726,9 +727,10 @@ mod tests {
     }
 
     /// The relative tracker too: with the gyroscope's increment its start turns as the flight
-    /// does, where its own extrapolation lags; the translation is left alone.
+    /// does, where its own extrapolation lags, and the translation is left alone; the
+    /// accelerometer's increment then moves it as the flight does.
     #[test]
-    fn the_gyro_increment_carries_the_relative_tracker() {
+    fn the_imu_increment_carries_the_relative_tracker() {
         let Some(flight) = flight(10.0) else {
             eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
             return;

@@ -478,7 +478,7 @@ impl PoseNetTracker {
             )
             .1;
             if let Some((target, weight)) = prior.translation {
-                gt += (self.batch.translation[0] - target).map(l1_subgradient) * weight;
+                gt += translation_tie(&self.batch.translation[0], &target, weight).1;
             }
         }
         self.cotangent.reset(1, Order::Pose);
@@ -523,6 +523,12 @@ fn rotation_tie(
         weight * r.coords.abs().sum(),
         Quaternion::from(r.coords.map(l1_subgradient)) * weight,
     )
+}
+
+/// `λ ‖t − t̂‖₁` and its gradient `λ sign(t − t̂)` in `t` ([`MotionIncrement`]).
+fn translation_tie(t: &Vector3<f64>, target: &Vector3<f64>, weight: f64) -> (f64, Vector3<f64>) {
+    let r = t - target;
+    (weight * r.abs().sum(), r.map(l1_subgradient) * weight)
 }
 
 /// The rotation vector `ω = θ n` of a unit quaternion `q = (w, u)` with `w ≥ 0` and its Jacobian
@@ -931,7 +937,7 @@ mod tests {
     }
 
     #[test]
-    fn rotation_tie_matches_central_differences() {
+    fn ties_match_central_differences() {
         let target = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.9);
         for q in [
             Quaternion::new(0.8, 0.1, -0.3, 0.4),
@@ -951,6 +957,18 @@ mod tests {
                     "{k}: {numeric} vs {g:?}"
                 );
             }
+        }
+        let (t, target) = (Vector3::new(0.3, -0.2, 0.05), Vector3::new(0.1, 0.4, -0.3));
+        let (_, g) = translation_tie(&t, &target, 0.8);
+        for k in 0..3 {
+            let h = 1e-7;
+            let (mut a, mut b) = (t, t);
+            a[k] += h;
+            b[k] -= h;
+            let numeric = (translation_tie(&a, &target, 0.8).0
+                - translation_tie(&b, &target, 0.8).0)
+                / (2.0 * h);
+            assert!((numeric - g[k]).abs() < 1e-6, "{k}: {numeric} vs {g:?}");
         }
     }
 
