@@ -85,24 +85,36 @@ pub fn gyro_tight_l1(
 /// readings (right-multiplied: body-frame rates). `imu` must be sorted by time and cover
 /// `[t0, t1]`; `None` otherwise.
 pub fn integrate_gyro(imu: &[ImuSample], t0: f64, t1: f64) -> Option<UnitQuaternion<f64>> {
-    let first = imu.first()?;
-    let last = imu.last()?;
+    Some(clipped_intervals(imu, t0, t1)?.fold(
+        UnitQuaternion::identity(),
+        |dq, (a, b, from, to)| {
+            dq * UnitQuaternion::from_scaled_axis((a.gyro + b.gyro) * (0.5 * (to - from)))
+        },
+    ))
+}
+
+/// The intervals between consecutive readings clipped to `[t0, t1]`, in order, as `(a, b, from,
+/// to)` with `from < to` the clipped ends; `None` unless `imu` (sorted by time) covers
+/// `[t0, t1]`, `t0 ≤ t1`.
+pub fn clipped_intervals(
+    imu: &[ImuSample],
+    t0: f64,
+    t1: f64,
+) -> Option<impl Iterator<Item = (&ImuSample, &ImuSample, f64, f64)>> {
+    let (first, last) = (imu.first()?, imu.last()?);
     if !(t0 <= t1 && first.t_secs <= t0 && t1 <= last.t_secs) {
         return None;
     }
     let start = imu.partition_point(|s| s.t_secs <= t0).max(1) - 1;
-    let mut dq = UnitQuaternion::identity();
-    for pair in imu[start..].windows(2) {
-        let (a, b) = (&pair[0], &pair[1]);
-        if a.t_secs >= t1 {
-            break;
-        }
-        let dt = b.t_secs.min(t1) - a.t_secs.max(t0);
-        if dt > 0.0 {
-            dq *= UnitQuaternion::from_scaled_axis((a.gyro + b.gyro) * (0.5 * dt));
-        }
-    }
-    Some(dq)
+    Some(
+        imu[start..]
+            .windows(2)
+            .take_while(move |pair| pair[0].t_secs < t1)
+            .filter_map(move |pair| {
+                let (from, to) = (pair[0].t_secs.max(t0), pair[1].t_secs.min(t1));
+                (to > from).then_some((&pair[0], &pair[1], from, to))
+            }),
+    )
 }
 
 /// The paper's loose gyroscope coupling (§3.4, "Loose coupling"): the rotation integrated from

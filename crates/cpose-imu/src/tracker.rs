@@ -520,21 +520,8 @@ fn weighted_acceleration(
     hi: f64,
     w: impl Fn(f64) -> f64,
 ) -> Option<Vector3<f64>> {
-    let (first, last) = (imu.first()?, imu.last()?);
-    if !(first.t_secs <= lo && hi <= last.t_secs) {
-        return None;
-    }
-    let start = imu.partition_point(|s| s.t_secs <= lo).max(1) - 1;
     let mut sum = Vector3::zeros();
-    for pair in imu[start..].windows(2) {
-        let (a, b) = (&pair[0], &pair[1]);
-        if a.t_secs >= hi {
-            break;
-        }
-        let (from, to) = (a.t_secs.max(lo), b.t_secs.min(hi));
-        if to <= from {
-            continue;
-        }
+    for (a, b, from, to) in losses::clipped_intervals(imu, lo, hi)? {
         let dt = to - from;
         let omega = (a.gyro + b.gyro) * 0.5;
         let mid = r * UnitQuaternion::from_scaled_axis(omega * (0.5 * dt));
