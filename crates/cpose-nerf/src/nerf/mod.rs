@@ -616,7 +616,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let noise_section = input.config.section("noise");
     let field_config =
         RadianceFieldConfig::from_section(&input.config.section("field"), input.run.seed)?;
-    let views = match exp.data.source {
+    let mut views = match exp.data.source {
         Source::Synthetic => synthetic_views(&exp)?,
         _ => dataset_views(&exp)?,
     };
@@ -635,7 +635,6 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         );
     }
     let initial = noise.apply(&views.train_truth, views.diameter);
-    let mut views = views;
     let widened = views.bounds.widened_for(&views.train_truth, &initial);
     if widened != views.bounds {
         input.run_dir.log(format_args!(
