@@ -636,15 +636,15 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     }
     let initial = noise.apply(&views.train_truth, views.diameter);
     let widened = views.bounds.widened_for(&views.train_truth, &initial);
-    if widened != views.bounds {
+    if widened.radius > views.bounds.radius * (1.0 + 1e-9) {
         input.run_dir.log(format_args!(
             "region of interest widened for the initial poses: radius {:.3} → {:.3}",
             views.bounds.radius, widened.radius
         ));
-        views.bounds = widened;
-        if let Some(clip) = views.settings.clip.as_mut() {
-            clip.radius = widened.radius;
-        }
+    }
+    views.bounds = widened;
+    if let Some(clip) = views.settings.clip.as_mut() {
+        clip.radius = widened.radius;
     }
     let seed = input.run.seed;
     let iterations = input.run.iterations(exp.train.iterations);
