@@ -1,8 +1,8 @@
 //! Task `slam_imu`: RGB-D neural SLAM with an IMU (paper §3.4, its EuRoC table and the
 //! supplement's IMU tables). Methods: NICE-SLAM's free pose (`baseline`), PoseNet relative to the
 //! previous camera without IMU (`prev`, task `slam`'s) and with the IMU tying its relative
-//! rotation (`prev_gyro`) or pose (`prev_imu`), and PoseNet with the IMU in tracking ([`crate::tracker`]) as `none`,
-//! `loose`, `tight`, `accel` or `combined`.
+//! rotation (`prev_gyro`) or pose (`prev_imu`), and PoseNet with the IMU in tracking
+//! ([`crate::tracker`]) as `none`, `loose`, `tight`, `accel` or `combined`.
 //!
 //! Data, either
 //! * **`[euroc]`**: the synthetic room rendered along a real flight — a EuRoC sequence's ground
