@@ -666,6 +666,24 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         views.settings.samples,
         train.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
     ));
+    if train.methods.contains(&Method::Posenet) {
+        // PoseNet's translation head is bounded, |t_k| < s (`posenet.translation_scale`); the
+        // correction that undoes the noise is `truth ∘ init⁻¹`.
+        let scale =
+            PoseNetConfig::from_section(&input.config.section("posenet"), seed)?.translation_scale;
+        let needed = views
+            .train_truth
+            .iter()
+            .zip(&initial)
+            .map(|(truth, init)| (truth * init.inverse()).translation.vector.amax())
+            .fold(0.0, f64::max);
+        if needed > 0.9 * scale {
+            input.run_dir.log(format_args!(
+                "warning: undoing the noise needs PoseNet translations up to {needed:.2}, at or \
+                 beyond its bound posenet.translation_scale = {scale}; raise it"
+            ));
+        }
+    }
     write_trajectory(input, "traj_gt.txt", &views.train_times, &views.train_truth)?;
     write_trajectory(input, "traj_init.txt", &views.train_times, &initial)?;
 
