@@ -1206,7 +1206,8 @@ mod tests {
     }
 
     /// The gradient the intrinsic tracker gives both networks matches central differences of
-    /// `L(T_prev ∘ T_o ∘ T_I) + λ_DOF DOF(T_I) + λ_o ‖v_o‖₁` in their parameters.
+    /// `L(T_prev ∘ R) + λ_DOF DOF(T_I) + λ_o ‖v_o‖₁` in their parameters, for both ways `R` is
+    /// made of `T_o` and `T_I` ([`Composition`]).
     #[test]
     fn intrinsic_gradient_matches_central_differences() {
         for composition in [Composition::Conjugate, Composition::Product] {
