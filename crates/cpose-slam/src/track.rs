@@ -826,21 +826,14 @@ impl IntrinsicTracker {
                     o.rotation.inverse() * gt_rel,
                 )
             }
-            Composition::Product => {
-                // O in O ∘ I: the correction cotangent with I as the initial pose.
-                let (gq_o, gt_o) = cpose_nerf::nerf::poses::correction_cotangent(
-                    &m,
-                    &o.rotation,
-                    &gq_rel,
-                    &gt_rel,
-                );
-                (
-                    gq_o,
-                    gt_o,
-                    q_o.conjugate() * gq_rel,
-                    o.rotation.inverse() * gt_rel,
-                )
-            }
+            Composition::Product => (
+                // q_R = q_o ⊗ q_I, t_R = R_o t_I + v_o.
+                gq_rel * q_i.conjugate()
+                    + rotated_vector_cotangent(&o.rotation, &m.translation.vector, &gt_rel),
+                gt_rel,
+                q_o.conjugate() * gq_rel,
+                o.rotation.inverse() * gt_rel,
+            ),
         };
         let (_, dq, dv) = dof_loss(&q_i, &m.translation.vector, self.view_angle);
         gq_i += dq * self.config.dof_weight;
