@@ -915,11 +915,11 @@ mod tests {
         .unwrap();
         // Away from the identity start (its zero output layers would hide the hidden layers).
         let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let mut params = cpose_core::pose_field::params_to_vec(model.net.as_ref());
-        for p in &mut params {
+        let mut start = cpose_core::pose_field::params_to_vec(model.net.as_ref());
+        for p in &mut start {
             *p += rng.random_range(-0.3f32..0.3);
         }
-        cpose_core::pose_field::params_from_slice(model.net.as_mut(), &params).unwrap();
+        cpose_core::pose_field::params_from_slice(model.net.as_mut(), &start).unwrap();
         let first = Isometry3::from_parts(
             Vector3::new(0.3, -0.2, 1.0).into(),
             UnitQuaternion::from_euler_angles(0.1, -0.3, 0.5),
@@ -943,6 +943,7 @@ mod tests {
                 + pose.rotation.into_inner().coords.dot(&gq.coords)
                 + pose.translation.vector.dot(&gt)
         };
+        // Frame 1's re-fit has moved the parameters: check at frame 2's.
         let params = cpose_core::pose_field::params_to_vec(model.net.as_ref());
         model.evaluate().unwrap();
         model.gradient(&gq, &gt).unwrap();
