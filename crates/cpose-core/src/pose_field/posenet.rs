@@ -1,8 +1,8 @@
 //! PoseNet (paper §3.1; the authors' `PoseNet.py`, algorithms.md §1.2): a camera trajectory as
 //! two small MLPs of normalised time.
 //!
-//! `t_n = 2(t − t_min)/(t_max − t_min) − 1`, `γ(t_n) = [t_n, sin(2^k π t_n), cos(2^k π t_n)]`
-//! (`k < F`), then a translation network `o = f_T(γ)` (3 outputs) and a rotation network
+//! `t_n = h · (2(t − t_min)/(t_max − t_min) − 1)` with `h` = `time_span` (1 in the paper),
+//! `γ(t_n) = [t_n, sin(2^k π t_n), cos(2^k π t_n)]` (`k < F`), then a translation network `o = f_T(γ)` (3 outputs) and a rotation network
 //! `r = f_R(γ)` (4 outputs), each `depth` linear layers of `width` units with `[h, γ]` fed to the
 //! skip layer. Heads: `p = s · tanh(o)` and `q = a/‖a‖` with
 //! `a = (1 − tanh r_0, tanh r_1, tanh r_2, tanh r_3)` (w, x, y, z), so `q_w > 0`. The last layers
@@ -10,7 +10,13 @@
 //!
 //! Time derivatives are exact: the networks carry the tangent streams `d/dt_n`, `d²/dt_n²` and
 //! the chain rule gives `d/dt = rate · d/dt_n`, `d²/dt² = rate² · d²/dt_n²` with
-//! `rate = 2/(t_max − t_min)`.
+//! `rate = 2h/(t_max − t_min)`.
+//!
+//! With `h = 1` each band repeats a whole number of times over the range, so the first and the
+//! last time share every sine and cosine: the network starts out treating time as a circle.
+//! An open trajectory whose ends must differ (noise that drifts from the first frame, a scan)
+//! learns better with `h = 0.5`: on the synthetic orbit at 20 % translation noise the rotation
+//! error fell from 4.3° to 1.2° (README, "NeRF from noisy poses").
 
 use faer::Accum;
 use nalgebra::{Quaternion, Vector3};
@@ -45,6 +51,10 @@ pub struct PoseNetConfig {
     /// Bound `s` of the translation head `p = s · tanh(o)`, in the trajectory's length unit
     /// (metres or scene units); default 1 (the authors' `(−1, 1)`).
     pub translation_scale: f64,
+    /// Half-width `h` of the embedding's time interval: the range maps to `[−h, h]`; default 1
+    /// (the authors' `[−1, 1]`). With `h = 1` every band has a whole number of periods over
+    /// the range, so `γ` at the first and at the last time differ in the linear term alone.
+    pub time_span: f64,
     /// Coarse-to-fine window `[start, end]` over the time bands (BARF's schedule applied to
     /// time, driven by [`PoseField::set_progress`]); `end ≤ start` (default `[0, 0]`) keeps every
     /// band on, as the paper.
@@ -64,6 +74,7 @@ impl Default for PoseNetConfig {
             encoding: Encoding::Sinusoidal,
             coupled: false,
             translation_scale: 1.0,
+            time_span: 1.0,
             c2f: [0.0, 0.0],
             seed: 0,
         }
@@ -111,6 +122,9 @@ impl PoseNetConfig {
                 "translation_scale = {} must be positive",
                 self.translation_scale
             ));
+        }
+        if !(self.time_span.is_finite() && self.time_span > 0.0) {
+            return invalid(format!("time_span = {} must be positive", self.time_span));
         }
         let [c2f_start, c2f_end] = self.c2f;
         if !(0.0..=1.0).contains(&c2f_start) || !(0.0..=1.0).contains(&c2f_end) {
@@ -397,13 +411,14 @@ impl<S: Real> PoseNet<S> {
             ws.parts.resize_with(parts, Part::default);
         }
         ws.used = parts;
-        let range = self.range;
+        let (range, span) = (self.range, self.config.time_span);
         let run = |p: usize, part: &mut Part<S>| {
             let r = nn::part_range(n, parts, p);
             let b = r.len();
             part.b = b;
             part.x.clear();
-            part.x.extend(times[r].iter().map(|&t| range.normalize(t)));
+            part.x
+                .extend(times[r].iter().map(|&t| span * range.normalize(t)));
             part.x.resize(streams * b, 0.0);
             if streams >= 2 {
                 part.x[b..2 * b].fill(1.0);
@@ -436,7 +451,7 @@ impl<S: Real> PoseNet<S> {
                 .for_each(|(p, part)| run(p, part));
         }
         out.reset(n, order);
-        let rate = range.normalized_rate();
+        let rate = span * range.normalized_rate();
         let (coupled, scale) = (self.config.coupled, self.config.translation_scale);
         for (p, part) in ws.parts[..parts].iter().enumerate() {
             let start = nn::part_range(n, parts, p).start;
@@ -565,7 +580,7 @@ impl<S: Real> PoseField<S> for PoseNet<S> {
             }
         };
         let streams = order as usize + 1;
-        let rate = self.range.normalized_rate();
+        let rate = self.config.time_span * self.range.normalized_rate();
         let (coupled, scale) = (self.config.coupled, self.config.translation_scale);
         let parts = self.ws.used;
         for (p, part) in self.ws.parts[..parts].iter_mut().enumerate() {
@@ -845,6 +860,10 @@ mod tests {
             PoseNetConfig {
                 encoding: Encoding::Linear,
                 skip_layer: 0,
+                ..small(Activation::Softplus)
+            },
+            PoseNetConfig {
+                time_span: 0.5,
                 ..small(Activation::Softplus)
             },
         ] {

@@ -34,7 +34,8 @@
 //! centres, as LLFF's — Kabsch's fix replaces BARF's third-row negation, which can misalign by
 //! many degrees ([`ReflectionFix`]); the log and `metrics.json` then also give BARF's reading.
 //!
-//! Outputs: `metrics.json` (`{condition: {method: {rot_err_deg, trans_err, psnr_db, ssim, …}}}`),
+//! Outputs: `metrics.json`
+//! (`{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err, psnr_db, ssim, …}}}`),
 //! `traj_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`, `traj_init.txt` (TUM),
 //! `trajectory_<method>.png`, `view_<k>_<method>.png` (rendered | truth), `depth_<k>_<method>.png`,
 //! `checkpoint_<method>.bin`.
@@ -544,6 +545,9 @@ struct MethodResult {
     /// Mean rotation error after Procrustes alignment (BARF's, with Kabsch's reflection fix),
     /// degrees.
     rot_err_deg: f64,
+    /// The rotation error left after removing the best common rotation of all cameras
+    /// ([`cpose_core::eval::BarfPoseErrors::rot_err_relative_deg`]), degrees.
+    rot_err_relative_deg: f64,
     /// Mean translation error after alignment, scene units.
     trans_err: f64,
     /// Only when the centres' best orthogonal map was a reflection: the errors with BARF's own
@@ -775,9 +779,10 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             seed,
         )?;
         input.run_dir.log(format_args!(
-            "{}: rotation {:.3}°, translation {:.4}, PSNR {:.2} dB (refined {}), SSIM {:.3}, {:.0} s",
+            "{}: rotation {:.3}° ({:.3}° relative), translation {:.4}, PSNR {:.2} dB (refined {}), SSIM {:.3}, {:.0} s",
             method.key(),
             result.rot_err_deg,
+            result.rot_err_relative_deg,
             result.trans_err,
             result.psnr_db,
             result
@@ -967,6 +972,7 @@ fn evaluate(
     let refined = refinement.iterations > 0;
     Ok(MethodResult {
         rot_err_deg: errors.rot_err_deg,
+        rot_err_relative_deg: errors.rot_err_relative_deg,
         trans_err: errors.trans_err,
         rot_err_deg_barf_fix: barf_fix.as_ref().map(|e| e.rot_err_deg),
         trans_err_barf_fix: barf_fix.as_ref().map(|e| e.trans_err),
