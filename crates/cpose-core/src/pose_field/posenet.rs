@@ -1,21 +1,21 @@
 //! PoseNet (paper §3.1; the authors' `PoseNet.py`, algorithms.md §1.2): a camera trajectory as
 //! two small MLPs of normalised time.
 //!
-//! `t_n = h · (2(t − t_min)/(t_max − t_min) − 1)` with `h` = `time_span` (1 in the paper),
-//! `γ(t_n) = [t_n, sin(2^k π t_n), cos(2^k π t_n)]` (`k < F`), then a translation network `o = f_T(γ)` (3 outputs) and a rotation network
-//! `r = f_R(γ)` (4 outputs), each `depth` linear layers of `width` units with `[h, γ]` fed to the
-//! skip layer. Heads: `p = s · tanh(o)` and `q = a/‖a‖` with
+//! `t_n = w · (2(t − t_min)/(t_max − t_min) − 1)` with `w` = `time_span` (1 in the paper),
+//! `γ(t_n) = [t_n, sin(2^k π t_n), cos(2^k π t_n)]` (`k < F`), then a translation network
+//! `o = f_T(γ)` (3 outputs) and a rotation network `r = f_R(γ)` (4 outputs), each `depth`
+//! linear layers of `width` units with `[h, γ]` fed to the skip layer. Heads: `p = s · tanh(o)` and `q = a/‖a‖` with
 //! `a = (1 − tanh r_0, tanh r_1, tanh r_2, tanh r_3)` (w, x, y, z), so `q_w > 0`. The last layers
 //! start at `U(0, 1e-6)`, which makes the field the identity pose at initialisation.
 //!
 //! Time derivatives are exact: the networks carry the tangent streams `d/dt_n`, `d²/dt_n²` and
 //! the chain rule gives `d/dt = rate · d/dt_n`, `d²/dt² = rate² · d²/dt_n²` with
-//! `rate = 2h/(t_max − t_min)`.
+//! `rate = 2w/(t_max − t_min)`.
 //!
-//! With `h = 1` each band repeats a whole number of times over the range, so the first and the
+//! With `w = 1` each band repeats a whole number of times over the range, so the first and the
 //! last time share every sine and cosine: the network starts out treating time as a circle.
 //! An open trajectory whose ends must differ (noise that drifts from the first frame, a scan)
-//! learns better with `h = 0.5`: on the synthetic orbit at 20 % translation noise the rotation
+//! learns better with `w = 0.5`: on the synthetic orbit at 20 % translation noise the rotation
 //! error fell from 4.3° to 1.2° (README, "NeRF from noisy poses").
 
 use faer::Accum;
@@ -51,9 +51,8 @@ pub struct PoseNetConfig {
     /// Bound `s` of the translation head `p = s · tanh(o)`, in the trajectory's length unit
     /// (metres or scene units); default 1 (the authors' `(−1, 1)`).
     pub translation_scale: f64,
-    /// Half-width `h` of the embedding's time interval: the range maps to `[−h, h]`; default 1
-    /// (the authors' `[−1, 1]`). With `h = 1` every band has a whole number of periods over
-    /// the range, so `γ` at the first and at the last time differ in the linear term alone.
+    /// Half-width `w` of the interval `[−w, w]` the time range maps to; default 1 (the
+    /// authors'). 0.5 suits open trajectories (module docs).
     pub time_span: f64,
     /// Coarse-to-fine window `[start, end]` over the time bands (BARF's schedule applied to
     /// time, driven by [`PoseField::set_progress`]); `end ≤ start` (default `[0, 0]`) keeps every
@@ -1156,6 +1155,10 @@ mod tests {
             },
             PoseNetConfig {
                 translation_scale: 0.0,
+                ..PoseNetConfig::default()
+            },
+            PoseNetConfig {
+                time_span: f64::NAN,
                 ..PoseNetConfig::default()
             },
             PoseNetConfig {
