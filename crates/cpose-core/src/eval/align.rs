@@ -320,26 +320,24 @@ pub fn barf_pose_errors(
     let alignment = procrustes_barf(&gt_centres, &pred_centres, fix)?;
     let mut rot = Vec::with_capacity(gt_centres.len());
     let mut trans = Vec::with_capacity(gt_centres.len());
+    // (true, aligned) rotations, for the relative error.
+    let mut pairs = Vec::with_capacity(gt_centres.len());
     for (gt, pred) in gt_world_from_cam.iter().zip(pred_world_from_cam) {
         let aligned = alignment.align_pose(pred);
         let r_al = aligned.rotation.to_rotation_matrix().into_inner();
         let r_gt = gt.rotation.to_rotation_matrix().into_inner();
         // tr(A Bᵀ) is the same for world-to-camera and camera-to-world rotations.
         rot.push(rotation_distance_barf(&r_al, &r_gt).to_degrees());
+        pairs.push((r_gt, r_al));
         let t_al = aligned.inverse().translation.vector;
         let t_gt = gt.inverse().translation.vector;
         trans.push((t_al - t_gt).norm());
     }
     let n = rot.len() as f64;
-    let common = common_rotation(gt_world_from_cam, pred_world_from_cam, &alignment)?;
-    let relative = gt_world_from_cam
+    let common = common_rotation(&pairs)?;
+    let relative = pairs
         .iter()
-        .zip(pred_world_from_cam)
-        .map(|(gt, pred)| {
-            let r_al = alignment.align_pose(pred).rotation.to_rotation_matrix();
-            let r_gt = gt.rotation.to_rotation_matrix().into_inner();
-            rotation_distance_barf(&(common * r_al).into_inner(), &r_gt).to_degrees()
-        })
+        .map(|(r_gt, r_al)| rotation_distance_barf(&(common * r_al), r_gt).to_degrees())
         .sum::<f64>()
         / n;
     Ok(BarfPoseErrors {
@@ -353,24 +351,16 @@ pub fn barf_pose_errors(
 }
 
 /// The rotation `C` that best turns the aligned orientations onto the true ones,
-/// `argmax_C Σ_i tr(C R_al,i R_gt,iᵀ)`: the projection of `Σ_i R_gt,i R_al,iᵀ` onto SO(3)
-/// (its polar factor, `U diag(1, 1, det(U Vᵀ)) Vᵀ`).
-fn common_rotation(
-    gt_world_from_cam: &[Isometry3<f64>],
-    pred_world_from_cam: &[Isometry3<f64>],
-    alignment: &BarfSim3,
-) -> Result<Rotation3<f64>, EvalError> {
-    let m: Matrix3<f64> = gt_world_from_cam
+/// `argmax_C Σ_i tr(C R_al,i R_gt,iᵀ)` over the pairs `(R_gt,i, R_al,i)`: the projection of
+/// `Σ_i R_gt,i R_al,iᵀ` onto SO(3) (its polar factor, `U diag(1, 1, det(U Vᵀ)) Vᵀ`).
+fn common_rotation(pairs: &[(Matrix3<f64>, Matrix3<f64>)]) -> Result<Matrix3<f64>, EvalError> {
+    let m: Matrix3<f64> = pairs
         .iter()
-        .zip(pred_world_from_cam)
-        .map(|(gt, pred)| {
-            let r_al = alignment.align_pose(pred).rotation.to_rotation_matrix();
-            gt.rotation.to_rotation_matrix().into_inner() * r_al.matrix().transpose()
-        })
+        .map(|(r_gt, r_al)| r_gt * r_al.transpose())
         .sum();
     let Svd3 { u, v_t, .. } = svd3(&m)?;
     let flip = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (u * v_t).determinant().signum()));
-    Ok(Rotation3::from_matrix_unchecked(u * flip * v_t))
+    Ok(u * flip * v_t)
 }
 
 #[cfg(test)]
