@@ -659,9 +659,9 @@ fn slam_imu_runs_on_simulated_and_real_imu() {
             "imu-euroc",
             vec![
                 "synthetic.frames=6",
-                "slam.methods=[\"loose\", \"accel\", \"prev_imu\"]",
+                "slam.methods=[\"loose\", \"accel\", \"prev_tight\", \"prev_combined\"]",
             ],
-            vec!["loose", "accel", "prev_imu"],
+            vec!["loose", "accel", "prev_tight", "prev_combined"],
         ),
     ];
     for (config, name, sets, keys) in cases {

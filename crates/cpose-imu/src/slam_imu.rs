@@ -1,8 +1,9 @@
 //! Task `slam_imu`: RGB-D neural SLAM with an IMU (paper §3.4, its EuRoC table and the
 //! supplement's IMU tables). Methods: NICE-SLAM's free pose (`baseline`), PoseNet relative to the
-//! previous camera without IMU (`prev`, task `slam`'s) and with the IMU tying its relative
-//! rotation (`prev_gyro`) or pose (`prev_imu`), and PoseNet with the IMU in tracking
-//! ([`crate::tracker`]) as `none`, `loose`, `tight`, `accel` or `combined`.
+//! previous camera without IMU (`prev`, task `slam`'s) and with the IMU (`prev_loose`,
+//! `prev_tight`, `prev_accel`, `prev_combined`; [`crate::tracker::RelativeImu`]), and the
+//! absolute PoseNet with the IMU in tracking ([`crate::tracker::ImuPoseNet`]) as `none`,
+//! `loose`, `tight`, `accel` or `combined`.
 //!
 //! Data, either
 //! * **`[euroc]`**: the synthetic room rendered along a real flight — a EuRoC sequence's ground
@@ -130,12 +131,18 @@ const ADIS16448: NoiseModel = NoiseModel {
 enum Method {
     Baseline,
     Prev,
-    /// `prev` with the gyroscope tying each frame's relative rotation ([`RelativeImu`]).
-    #[serde(rename = "prev_gyro")]
-    PrevGyro,
-    /// `prev_gyro` with the accelerometer tying its relative translation too.
-    #[serde(rename = "prev_imu")]
-    PrevImu,
+    /// `prev` with the gyroscope's rotation over each frame interval ([`RelativeImu`]).
+    #[serde(rename = "prev_loose")]
+    PrevLoose,
+    /// `prev` with the gyroscope on the rate of its increments.
+    #[serde(rename = "prev_tight")]
+    PrevTight,
+    /// `prev` with the accelerometer's displacement over each frame interval.
+    #[serde(rename = "prev_accel")]
+    PrevAccel,
+    /// `prev_tight` and `prev_accel`.
+    #[serde(rename = "prev_combined")]
+    PrevCombined,
     #[serde(untagged)]
     Imu(ImuMode),
 }
@@ -145,8 +152,10 @@ impl Method {
         match self {
             Method::Baseline => "baseline",
             Method::Prev => "prev",
-            Method::PrevGyro => "prev_gyro",
-            Method::PrevImu => "prev_imu",
+            Method::PrevLoose => "prev_loose",
+            Method::PrevTight => "prev_tight",
+            Method::PrevAccel => "prev_accel",
+            Method::PrevCombined => "prev_combined",
             Method::Imu(mode) => mode.key(),
         }
     }
@@ -373,8 +382,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
     if exp.slam.methods.is_empty() {
         bail!(
-            "slam.methods is empty: name at least one of baseline, prev, prev_gyro, prev_imu, \
-             none, loose, tight, accel, combined"
+            "slam.methods is empty: name at least one of baseline, prev, prev_loose, \
+             prev_tight, prev_accel, prev_combined, none, loose, tight, accel, combined"
         );
     }
     exp.imu.validate()?;
@@ -422,19 +431,30 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         seed,
                     )?) as _)
                 }),
-                Method::PrevGyro | Method::PrevImu => Box::new(move || {
-                    Ok(Box::new(RelativeImu::new(
-                        posenet,
-                        imu_config,
-                        method == Method::PrevImu,
-                        imu.clone(),
-                        gravity,
-                        frame_times.clone(),
-                        pixels,
-                        range,
-                        seed,
-                    )?) as _)
-                }),
+                Method::PrevLoose
+                | Method::PrevTight
+                | Method::PrevAccel
+                | Method::PrevCombined => {
+                    let mode = match method {
+                        Method::PrevTight => ImuMode::Tight,
+                        Method::PrevAccel => ImuMode::Accel,
+                        Method::PrevCombined => ImuMode::Combined,
+                        _ => ImuMode::Loose,
+                    };
+                    Box::new(move || {
+                        Ok(Box::new(RelativeImu::new(
+                            posenet,
+                            imu_config,
+                            mode,
+                            imu.clone(),
+                            gravity,
+                            frame_times.clone(),
+                            pixels,
+                            range,
+                            seed,
+                        )?) as _)
+                    })
+                }
                 Method::Imu(mode) => Box::new(move || {
                     Ok(Box::new(ImuPoseNet::new(
                         posenet,
@@ -495,7 +515,7 @@ mod tests {
             m: Vec<Method>,
         }
         let m: M = toml::from_str(
-            r#"m = ["baseline", "prev", "prev_gyro", "prev_imu", "none", "tight", "combined"]"#,
+            r#"m = ["baseline", "prev", "prev_loose", "prev_combined", "none", "tight", "combined"]"#,
         )
         .expect("valid");
         let keys: Vec<&str> = m.m.iter().map(|m| m.key()).collect();
@@ -504,8 +524,8 @@ mod tests {
             [
                 "baseline",
                 "prev",
-                "prev_gyro",
-                "prev_imu",
+                "prev_loose",
+                "prev_combined",
                 "none",
                 "tight",
                 "combined"

@@ -502,7 +502,7 @@ impl Fit<'_> {
                 &out,
                 &self.known_targets,
                 self.cfg.pose_weight,
-                1.0,
+                (1.0, 1.0),
                 &mut cot,
             );
             field.backward(&self.seq.known_times, &cot, &mut grad)?;

@@ -166,8 +166,9 @@ pub struct PoseNetTrackConfig {
     /// Earlier frames per re-fitting step (plus the newest).
     pub refit_batch: usize,
     /// A new tracking optimiser for every frame, as the authors' PoseNet tracking (and NICE-SLAM's
-    /// free pose); `false` keeps the Adam moments from frame to frame. Re-fitting has its own
-    /// optimiser, kept for the whole run.
+    /// free pose), and again once an objective's prediction steps end
+    /// ([`PoseNetTracker::set_objective`]); `false` keeps the Adam moments from frame to frame.
+    /// Re-fitting has its own optimiser, kept for the whole run.
     pub fresh_optimizer: bool,
     /// Rotation spread of the random reference, radians.
     pub random_rotation: f64,
@@ -222,6 +223,20 @@ pub struct PoseNetTracker {
     increment: Option<MotionIncrement>,
     /// The frame being tracked: what its relative pose should be, and the weights.
     prior: Option<RelativePrior>,
+    /// A term on the network itself for the next frame, and its prediction steps
+    /// ([`PoseNetTracker::set_objective`]).
+    objective: Option<(Box<dyn NetworkObjective>, usize)>,
+}
+
+/// A term of a frame's objective on PoseNet itself rather than on the frame's pose — an IMU's
+/// terms on the network's time derivatives ([`PoseNetTracker::set_objective`]).
+pub trait NetworkObjective: Send {
+    /// Adds the term's gradient with respect to the network's parameters to `grad`; returns the
+    /// term's value.
+    fn accumulate(&mut self, net: &mut dyn PoseField<f32>, grad: &mut [f32])
+    -> anyhow::Result<f64>;
+    /// The prediction has ended and tracking begins: terms meant for the prediction alone drop.
+    fn start_tracking(&mut self) {}
 }
 
 /// A measured motion from the previous pose `T_{i−1}` to the one being tracked — an IMU's
@@ -278,12 +293,24 @@ impl PoseNetTracker {
             rng: ChaCha8Rng::seed_from_u64(seed),
             increment: None,
             prior: None,
+            objective: None,
         })
     }
 
     /// The measured increment of the next frame to begin (`None`: no tie); it is used once.
     pub fn set_increment(&mut self, increment: Option<MotionIncrement>) {
         self.increment = increment;
+    }
+
+    /// A term added to every step of the next frame to begin, which then starts with
+    /// `predict_steps` Adam steps on its ties and this term alone (`None`: no term); it lasts until
+    /// that frame ends.
+    pub fn set_objective(
+        &mut self,
+        objective: Option<Box<dyn NetworkObjective>>,
+        predict_steps: usize,
+    ) {
+        self.objective = objective.map(|o| (o, predict_steps));
     }
 
     /// Evaluates the network at the current time.
@@ -375,6 +402,7 @@ impl PoseModel for PoseNetTracker {
         self.time = time;
         self.evaluate()?;
         self.prior = None;
+        let mut predict_steps = 0;
         if let Some(inc) = self.increment.take() {
             let previous = &history[index - 1];
             let reference = self.current_ref.inverse();
@@ -390,8 +418,19 @@ impl PoseModel for PoseNetTracker {
                 rotation_weight: inc.rotation_weight,
                 translation,
             });
-            for _ in 0..inc.predict_steps {
-                self.step_relative(&Quaternion::new(0.0, 0.0, 0.0, 0.0), &Vector3::zeros())?;
+            predict_steps = inc.predict_steps;
+        }
+        if let Some((_, steps)) = &self.objective {
+            predict_steps = predict_steps.max(*steps);
+        }
+        for _ in 0..predict_steps {
+            self.step_relative(&Quaternion::new(0.0, 0.0, 0.0, 0.0), &Vector3::zeros())?;
+        }
+        if let Some((objective, steps)) = &mut self.objective {
+            objective.start_tracking();
+            if *steps > 0 && self.config.fresh_optimizer {
+                // The objective's prediction gradients would scale tracking's steps down.
+                self.adam.reset();
             }
         }
         Ok(self.pose())
@@ -411,6 +450,7 @@ impl PoseModel for PoseNetTracker {
     }
 
     fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        self.objective = None;
         let rel = self.current_ref.inverse() * pose;
         self.memorise(time, rel)
     }
@@ -489,6 +529,9 @@ impl PoseNetTracker {
         self.grad.fill(0.0);
         self.net
             .backward(&[self.time], &self.cotangent, &mut self.grad)?;
+        if let Some((objective, _)) = &mut self.objective {
+            objective.accumulate(self.net.as_mut(), &mut self.grad)?;
+        }
         let (lr_r, lr_t) = (
             self.lr(ParamKind::Rotation),
             self.lr(ParamKind::Translation),
