@@ -67,15 +67,30 @@ pub fn gyro_tight_l1(
     weight: f64,
     grad: &mut PoseBatch,
 ) -> f64 {
-    let n = gyro_body.len() as f64;
+    let rates = gyro_body.iter().map(|w| (*w, Vector3::zeros()));
+    rate_l1(out, rates, weight, grad)
+}
+
+/// `L = w/n Σ_i |q̇_i − ½ (q_i ⊗ e_i − e₀ᵢ ⊗ q_i)|₁` over `(ω_i, ω₀ᵢ)`, `e = (0, ω)`,
+/// `e₀ = (0, ω₀)`: [`gyro_tight_l1`] (`ω₀ = 0`) and [`increment_gyro_l1`]. Gradient: with
+/// `s = sign(r)`, `∂L/∂q̇ = w s/n` and `∂L/∂q = w (s ⊗ e − e₀ ⊗ s)/(2n)`
+/// (`⟨s, q ⊗ e⟩ = ⟨s ⊗ e*, q⟩`, `⟨s, e₀ ⊗ q⟩ = ⟨e₀* ⊗ s, q⟩`, `e* = −e`).
+fn rate_l1(
+    out: &PoseBatch,
+    rates: impl ExactSizeIterator<Item = (Vector3<f64>, Vector3<f64>)>,
+    weight: f64,
+    grad: &mut PoseBatch,
+) -> f64 {
+    let n = rates.len() as f64;
     let mut loss = 0.0;
-    for (i, w) in gyro_body.iter().enumerate() {
-        let e = Quaternion::from_imag(*w);
-        let r = out.rotation_rate[i] - out.rotation[i] * e * 0.5;
-        loss += l1_q(&r);
-        let s = sign_q(&r) * (weight / n);
+    for (i, (w, w0)) in rates.enumerate() {
+        let (e, e0) = (Quaternion::from_imag(w), Quaternion::from_imag(w0));
+        let q = out.rotation[i];
+        let residual = out.rotation_rate[i] - (q * e - e0 * q) * 0.5;
+        loss += l1_q(&residual);
+        let s = sign_q(&residual) * (weight / n);
         grad.rotation_rate[i] += s;
-        grad.rotation[i] -= s * e.conjugate() * 0.5;
+        grad.rotation[i] += (s * e - e0 * s) * 0.5;
     }
     weight * loss / n
 }
@@ -228,31 +243,15 @@ pub fn interpolate(imu: &[ImuSample], t: f64) -> Option<ImuSample> {
 /// supplement's IMU reference `T_{b_{i−1}, b_i}`). As a function of time that network is the
 /// motion over the last frame interval, `N(τ) = T(τ − Δ)⁻¹ T(τ)`; with `q̇ = ½ q ⊗ (0, ω)` at both
 /// ends its rotation obeys `q̇_N = ½ (q_N ⊗ e − e₀ ⊗ q_N)`, `e = (0, ω(τ))`, `e₀ = (0, ω₀)`.
-/// `L = w/n Σ_i |r_i|₁`, `r = q̇_N − ½ (q_N ⊗ e − e₀ ⊗ q_N)`.
-///
-/// Gradient: with `s = sign(r)`, `∂L/∂q̇ = w s/n` and `∂L/∂q = w (s ⊗ e − e₀ ⊗ s)/(2n)`
-/// (`⟨s, q ⊗ e⟩ = ⟨s ⊗ e*, q⟩`, `⟨s, e₀ ⊗ q⟩ = ⟨e₀* ⊗ s, q⟩`, `e* = −e`).
+/// `L = w/n Σ_i |q̇_N − ½ (q_N ⊗ e − e₀ ⊗ q_N)|₁`.
 pub fn increment_gyro_l1(
     out: &PoseBatch,
     readings: &[GyroWindow],
     weight: f64,
     grad: &mut PoseBatch,
 ) -> f64 {
-    let n = readings.len() as f64;
-    let mut loss = 0.0;
-    for (i, r) in readings.iter().enumerate() {
-        let (e, e0) = (
-            Quaternion::from_imag(r.gyro),
-            Quaternion::from_imag(r.gyro_start),
-        );
-        let q = out.rotation[i];
-        let residual = out.rotation_rate[i] - (q * e - e0 * q) * 0.5;
-        loss += l1_q(&residual);
-        let s = sign_q(&residual) * (weight / n);
-        grad.rotation_rate[i] += s;
-        grad.rotation[i] += (s * e - e0 * s) * 0.5;
-    }
-    weight * loss / n
+    let rates = readings.iter().map(|r| (r.gyro, r.gyro_start));
+    rate_l1(out, rates, weight, grad)
 }
 
 #[cfg(test)]
