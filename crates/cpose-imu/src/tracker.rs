@@ -478,9 +478,10 @@ impl PoseModel for ImuPoseNet {
 /// - `tight`: the network read as the motion over the last frame interval,
 ///   `N(τ) = T(τ − Δ)⁻¹ T(τ)`, its rate supervised at the readings in `(t_{i−1}, t_i]`
 ///   ([`losses::increment_gyro_l1`], weight `λ_g P`). While predicting, the rotations of the
-///   latest `imu.hold_frames` increments are held ([`HOLD_QUATERNION`]) so that the relation
-///   carries them forward. The relation fixes only the change of the increment, so an error of
-///   the previous increment persists; loose coupling ties each increment afresh.
+///   latest `imu.hold_frames` increments are held (an error of 0.01 in the quaternion, ≈ 1.1°,
+///   costs one unit of the per-pixel tracking loss) so that the relation carries them forward.
+///   The relation fixes only the change of the increment, so an error of the previous increment
+///   persists; loose coupling ties each increment afresh.
 /// - `accel`: the accelerometer's displacement over the frame interval
 ///   ([`accelerometer_displacement`], weight `λ_a P` per metre) ties the frame's relative
 ///   translation. Its velocity comes from the two previous estimates, so a tight tie feeds their
