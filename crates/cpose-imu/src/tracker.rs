@@ -120,6 +120,14 @@ impl ImuTrackConfig {
     }
 }
 
+/// The readings of `imu` (sorted by time) in `(from, to]`, at most `max` of them, evenly spread.
+fn spread(imu: &[ImuSample], from: f64, to: f64, max: usize) -> impl Iterator<Item = &ImuSample> {
+    let lo = imu.partition_point(|s| s.t_secs <= from);
+    let count = imu.partition_point(|s| s.t_secs <= to).saturating_sub(lo);
+    let take = count.min(max);
+    (0..take).map(move |k| &imu[lo + k * count / take])
+}
+
 /// PoseNet with IMU losses (module docs).
 pub struct ImuPoseNet {
     net: Box<dyn PoseField<f32>>,
@@ -217,20 +225,13 @@ impl ImuPoseNet {
         self.gyro.clear();
         self.accel.clear();
         self.delta = None;
-        if self.mode != ImuMode::None {
-            let lo = self.imu.partition_point(|s| s.t_secs <= from);
-            let hi = self.imu.partition_point(|s| s.t_secs <= t1);
-            let count = hi - lo;
-            let take = count.min(self.imu_config.max_readings);
-            if self.mode == ImuMode::Loose {
-                self.delta = losses::integrate_gyro(&self.imu, t0, t1);
-            } else {
-                for k in 0..take {
-                    let s = &self.imu[lo + k * count / take];
-                    self.times.push(s.t_secs);
-                    self.gyro.push(s.gyro);
-                    self.accel.push(s.accel);
-                }
+        if self.mode == ImuMode::Loose {
+            self.delta = losses::integrate_gyro(&self.imu, t0, t1);
+        } else if self.mode != ImuMode::None {
+            for s in spread(&self.imu, from, t1, self.imu_config.max_readings) {
+                self.times.push(s.t_secs);
+                self.gyro.push(s.gyro);
+                self.accel.push(s.accel);
             }
         }
         self.times.extend([t0, t1]);
@@ -544,16 +545,12 @@ impl RelativeImu {
         let delta = time - self.frame_times[index - 1];
         let held = (index - 1).min(self.config.hold_frames);
         let from = self.frame_times[index - 1];
-        let lo = self.imu.partition_point(|s| s.t_secs <= from);
-        let hi = self.imu.partition_point(|s| s.t_secs <= time);
-        let count = hi - lo;
-        let take = count.min(self.config.max_readings);
-        let (times, readings): (Vec<f64>, Vec<losses::GyroWindow>) = (0..take)
-            .filter_map(|k| {
-                let tau = self.imu[lo + k * count / take].t_secs;
-                losses::GyroWindow::at(&self.imu, tau, delta).map(|r| (tau, r))
-            })
-            .unzip();
+        let (times, readings): (Vec<f64>, Vec<losses::GyroWindow>) =
+            spread(&self.imu, from, time, self.config.max_readings)
+                .filter_map(|s| {
+                    losses::GyroWindow::at(&self.imu, s.t_secs, delta).map(|r| (s.t_secs, r))
+                })
+                .unzip();
         if readings.is_empty() {
             bail!("the IMU readings do not cover frame {index} and the interval before it");
         }

@@ -4,9 +4,10 @@
 //! `t_n = w · (2(t − t_min)/(t_max − t_min) − 1)` with `w` = `time_span` (1 in the paper),
 //! `γ(t_n) = [t_n, sin(2^k π t_n), cos(2^k π t_n)]` (`k < F`), then a translation network
 //! `o = f_T(γ)` (3 outputs) and a rotation network `r = f_R(γ)` (4 outputs), each `depth`
-//! linear layers of `width` units with `[h, γ]` fed to the skip layer. Heads: `p = s · tanh(o)` and `q = a/‖a‖` with
-//! `a = (1 − tanh r_0, tanh r_1, tanh r_2, tanh r_3)` (w, x, y, z), so `q_w > 0`. The last layers
-//! start at `U(0, 1e-6)`, which makes the field the identity pose at initialisation.
+//! linear layers of `width` units with `[h, γ]` fed to the skip layer. Heads: `p = s · tanh(o)`
+//! and `q = a/‖a‖` with `a = (1 − tanh r_0, tanh r_1, tanh r_2, tanh r_3)` (w, x, y, z), so
+//! `q_w > 0`. The last layers start at `U(0, 1e-6)`, which makes the field the identity pose at
+//! initialisation.
 //!
 //! Time derivatives are exact: the networks carry the tangent streams `d/dt_n`, `d²/dt_n²` and
 //! the chain rule gives `d/dt = rate · d/dt_n`, `d²/dt² = rate² · d²/dt_n²` with
