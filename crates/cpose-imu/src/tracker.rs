@@ -26,7 +26,7 @@
 //! One network over a long run has too few periods for a fast stretch of it (the finest of
 //! `F` bands spans the run over `2^{F−1}`). With `imu.window_secs`, a network spans only that
 //! long: when a frame passes its end, the next one starts at the earliest of the latest
-//! `imu.hold_frames` frames, in that frame's body pose, fitted to those frames.
+//! `imu.hold_frames` frames (at least two), in that frame's body pose, fitted to those frames.
 //!
 //! Gyroscope losses: loose (the rotation integrated from `t_{i−1}` to `t_i`), tight (`q̇` at
 //! every reading); the accelerometer through `p̈` with the rotation taken as given
@@ -83,7 +83,8 @@ pub struct ImuTrackConfig {
     /// Adam learning rate of this tracker's rotation network; it replaces `posenet.lr_rotation`.
     pub lr_rotation: f64,
     /// Seconds of time one network spans (0: the whole run). When a frame passes its end, a new
-    /// network starts at the earliest of the `hold_frames` latest frames, fitted to them.
+    /// network starts at the earliest of the `hold_frames` latest frames (at least two), fitted
+    /// to them.
     pub window_secs: f64,
     /// Frequency bands of a windowed network (0: `posenet.network.bands`).
     pub window_bands: usize,
