@@ -207,16 +207,15 @@ impl ImuPoseNet {
         let mut network = config.network.clone();
         network.seed = network.seed.wrapping_add(seed);
         network.translation_scale = imu_config.translation_scale;
-        let range = if imu_config.window_secs > 0.0 {
+        let window = imu_config.window_secs;
+        let net: Box<dyn PoseField<f32>> = if window > 0.0 {
             if imu_config.window_bands > 0 {
                 network.bands = imu_config.window_bands;
             }
-            TimeRange::new(range.start_secs, range.start_secs + imu_config.window_secs)
-                .context("imu.window_secs must be positive")?
+            window_network(&network, window, 0, range.start_secs, range.start_secs)?
         } else {
-            range
+            Box::new(network.init::<f32>(range)?)
         };
-        let net: Box<dyn PoseField<f32>> = Box::new(network.init::<f32>(range)?);
         let n = net.num_params();
         Ok(Self {
             net,
@@ -441,7 +440,7 @@ impl ImuPoseNet {
             .collect();
         self.reference *= origin;
         self.window += 1;
-        self.net = self.window_network(start, time)?;
+        self.net = window_network(&self.network, window, self.window, start, time)?;
         self.adam.reset();
         self.refit_adam.reset();
         let all: Vec<usize> = (0..kept).collect();
@@ -450,16 +449,22 @@ impl ImuPoseNet {
         }
         Ok(())
     }
+}
 
-    /// The network of window `self.window`, from `start` to `start + imu.window_secs` or to
-    /// `time` if that is later, at the identity.
-    fn window_network(&self, start: f64, time: f64) -> anyhow::Result<Box<dyn PoseField<f32>>> {
-        let end = (start + self.imu_config.window_secs).max(time);
-        let range = TimeRange::new(start, end).context("frame times must increase")?;
-        let mut network = self.network.clone();
-        network.seed = network.seed.wrapping_add(self.window);
-        Ok(Box::new(network.init::<f32>(range)?))
-    }
+/// The network of window number `index` (its seed offset by it), at the identity, from `start`
+/// to `start + window_secs` or to `time` if that is later.
+fn window_network(
+    network: &PoseNetConfig,
+    window_secs: f64,
+    index: u64,
+    start: f64,
+    time: f64,
+) -> anyhow::Result<Box<dyn PoseField<f32>>> {
+    let end = (start + window_secs).max(time);
+    let range = TimeRange::new(start, end).context("frame times must increase")?;
+    let mut network = network.clone();
+    network.seed = network.seed.wrapping_add(index);
+    Ok(Box::new(network.init::<f32>(range)?))
 }
 
 impl PoseModel for ImuPoseNet {
@@ -546,7 +551,8 @@ impl PoseModel for ImuPoseNet {
             bail!("corrupt IMU PoseNet state in the checkpoint");
         };
         if self.window > 0 {
-            self.net = self.window_network(start, end)?;
+            let window = self.imu_config.window_secs;
+            self.net = window_network(&self.network, window, self.window, start, end)?;
         }
         cpose_core::pose_field::params_from_slice(self.net.as_mut(), &r.f32s()?)?;
         for adam in [&mut self.adam, &mut self.refit_adam] {
