@@ -401,21 +401,21 @@ impl ImuPoseNet {
                 .copied()
                 .chain(n - recent..n)
                 .collect();
-            self.fit_step(&chosen)?;
+            let (times, targets): (Vec<f64>, Vec<Isometry3<f64>>) =
+                chosen.iter().map(|&j| self.memory[j]).unzip();
+            self.fit_step(&times, &targets)?;
         }
         Ok(())
     }
 
-    /// One Adam step of the re-fitting optimiser on the squared pose errors of the chosen frames
-    /// of the memory.
-    fn fit_step(&mut self, chosen: &[usize]) -> anyhow::Result<()> {
-        let (times, targets): (Vec<f64>, Vec<Isometry3<f64>>) =
-            chosen.iter().map(|&j| self.memory[j]).unzip();
-        self.net.forward(&times, Order::Pose, &mut self.out)?;
+    /// One Adam step of the re-fitting optimiser on the squared errors of the poses at `times`
+    /// against `targets`.
+    fn fit_step(&mut self, times: &[f64], targets: &[Isometry3<f64>]) -> anyhow::Result<()> {
+        self.net.forward(times, Order::Pose, &mut self.out)?;
         self.cot.reset(times.len(), Order::Pose);
-        losses::pose_l2(&self.out, &targets, 1.0, (1.0, 1.0), &mut self.cot);
+        losses::pose_l2(&self.out, targets, 1.0, (1.0, 1.0), &mut self.cot);
         self.grad.fill(0.0);
-        self.net.backward(&times, &self.cot, &mut self.grad)?;
+        self.net.backward(times, &self.cot, &mut self.grad)?;
         let lr = self.lr();
         self.refit_adam
             .step_pose_field(self.net.as_mut(), &self.grad, &lr);
@@ -443,9 +443,9 @@ impl ImuPoseNet {
         self.net = window_network(&self.network, window, self.window, start, time)?;
         self.adam.reset();
         self.refit_adam.reset();
-        let all: Vec<usize> = (0..kept).collect();
+        let (times, targets): (Vec<f64>, Vec<Isometry3<f64>>) = self.memory.iter().copied().unzip();
         for _ in 0..WINDOW_FIT_STEPS {
-            self.fit_step(&all)?;
+            self.fit_step(&times, &targets)?;
         }
         Ok(())
     }
