@@ -21,7 +21,7 @@
 //!    whose positions hold the network, so that the velocity is defined. The network's own
 //!    translation barely moves past the last frame (the real flight at 5 Hz, every earlier frame
 //!    perfect: 9.8 cm off, standing still 9.0 cm). A start at the latest frames' velocity was
-//!    2.2 cm off there, but on EuRoC V1_02 at 10 Hz it lost the fast stretch no later, and once
+//!    2.2 cm off there, but on EuRoC V1_02 at 10 Hz it lost the flight as soon or sooner, and once
 //!    lost it carried the estimate away by hundreds of metres; it is not used.
 //! 2. **Tracking**: every step adds the IMU loss to the tracking loss, `L_track/P + λ_g L_gyro +
 //!    λ_a L_acc` (per pixel, `P = tracking.pixels`; the paper's weights are 1 and 1).
