@@ -402,14 +402,13 @@ impl ImuPoseNet {
         let mut picks: Vec<usize> = (0..n - recent).collect();
         for _ in 0..self.config.refit_steps {
             picks.shuffle(&mut self.rng);
-            let chosen: Vec<usize> = picks
+            let (times, targets): (Vec<f64>, Vec<Isometry3<f64>>) = picks
                 .iter()
                 .take(self.config.refit_batch)
                 .copied()
                 .chain(n - recent..n)
-                .collect();
-            let (times, targets): (Vec<f64>, Vec<Isometry3<f64>>) =
-                chosen.iter().map(|&j| self.memory[j]).unzip();
+                .map(|j| self.memory[j])
+                .unzip();
             self.fit_step(&times, &targets)?;
         }
         Ok(())
