@@ -31,7 +31,8 @@
 //!    L_gyro` (per pixel, `P = tracking.pixels`; the paper's weight is 1). The accelerometer's
 //!    loss on `p̈` is not added: nothing holds the network's velocity while tracking, so it
 //!    bends the curve freely (on the simulated room, `accel` moved frame 1 by 0.4 m and lost
-//!    it), and on EuRoC V1_02 `combined` lost the flight at frame 228 with it, 233 without.
+//!    it; on EuRoC V1_02, `combined` lost the flight at frames 228–234 in every variant with
+//!    it).
 //! 3. **Memory**: the chosen pose is kept and PoseNet re-fitted on the list, as without IMU.
 //!
 //! One network over a long run has too few periods for a fast stretch of it (the finest of
