@@ -646,6 +646,19 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             views.bounds.radius, widened.radius
         ));
     }
+    let lost = centre_leaves_view(
+        &views.camera,
+        views.bounds.centre,
+        &views.train_truth,
+        &initial,
+    );
+    if lost > 0 {
+        input.run_dir.log(format_args!(
+            "the initial poses put the scene's centre outside the image in {lost} of {} \
+             training views",
+            initial.len()
+        ));
+    }
     views.bounds = widened;
     if let Some(clip) = views.settings.clip.as_mut() {
         clip.radius = widened.radius;
@@ -803,6 +816,29 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
 /// writes `checkpoint` after every `checkpoint_every` steps (0: never). A failed step or
 /// checkpoint ends the run with one error naming the method and the last good checkpoint (a
 /// diverged state never overwrites it, see [`Trainer::save_checkpoint`]) or saying there is none.
+/// How many views see the point `centre` inside the image from their true pose but not from
+/// their initial one. Noise that turns cameras about the scene keeps it in view; a shift across
+/// the view direction moves it towards the border and beyond.
+fn centre_leaves_view(
+    camera: &PinholeCamera,
+    centre: [f64; 3],
+    truth: &[Isometry3<f64>],
+    initial: &[Isometry3<f64>],
+) -> usize {
+    let centre = nalgebra::Point3::from(centre);
+    let in_view = |world_from_camera: &Isometry3<f64>| {
+        let p = world_from_camera.inverse_transform_point(&centre).coords;
+        camera.project(&p).is_some_and(|[u, v]| {
+            (0.0..camera.width as f64).contains(&u) && (0.0..camera.height as f64).contains(&v)
+        })
+    };
+    truth
+        .iter()
+        .zip(initial)
+        .filter(|(t, i)| in_view(t) && !in_view(i))
+        .count()
+}
+
 fn train_steps(
     trainer: &mut Trainer<'_>,
     method: Method,
@@ -1076,6 +1112,23 @@ mod tests {
 
     /// Issue "a NaN loss — one clear message, the last good checkpoint kept": the task's error
     /// names the method, the iteration and the checkpoint that is still good.
+    #[test]
+    fn a_sideways_shift_moves_the_centre_out_of_view_and_a_turn_about_it_does_not() {
+        // 100×100 at 40°: at 4 units the image spans ±1.46 across the view.
+        let camera = PinholeCamera::from_fov_x(100, 100, 40f64.to_radians());
+        let truth = [Isometry3::translation(0.0, 0.0, -4.0)];
+        let moved = |delta: Isometry3<f64>| {
+            centre_leaves_view(&camera, [0.0; 3], &truth, &[delta * truth[0]])
+        };
+        let turn = Isometry3::rotation(Vector3::y() * 60f64.to_radians());
+        assert_eq!(moved(turn), 0);
+        assert_eq!(moved(Isometry3::translation(1.2, 0.0, 0.0)), 0);
+        assert_eq!(moved(Isometry3::translation(1.7, 0.0, 0.0)), 1);
+        assert_eq!(moved(Isometry3::translation(0.0, -1.7, 0.0)), 1);
+        // Behind the camera is out of view too.
+        assert_eq!(moved(Isometry3::translation(0.0, 0.0, 5.0)), 1);
+    }
+
     #[test]
     fn a_nan_loss_ends_training_with_one_line_naming_the_last_good_checkpoint() {
         let (message, saved) = diverging_run(2, 5);
