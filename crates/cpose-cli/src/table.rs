@@ -118,7 +118,7 @@ mod tests {
 
     #[test]
     fn rows_are_paths_and_columns_are_last_keys() {
-        let dir = std::env::temp_dir().join(format!("cpose-table-{}", std::process::id()));
+        let dir = cpose_core::testing::TempDir::new("table");
         let (a, b) = (dir.join("rm30"), dir.join("rm60"));
         for (d, rot) in [(&a, 0.25), (&b, 12.5)] {
             std::fs::create_dir_all(d).unwrap();
@@ -155,6 +155,5 @@ mod tests {
             format!("{err:#}").contains("missing/metrics.json"),
             "{err:#}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -173,6 +173,8 @@ fn every_config_runs_as_a_smoke_test() {
     let data = cpose_core::fs::shared_data_dir();
     'configs: for config in configs {
         let text = std::fs::read_to_string(&config).unwrap();
+        // The run's folder and any data it generates, removed after the config.
+        let scratch = temp_dir("smoke");
         let mut args: Vec<String> =
             vec!["run".into(), config.to_str().unwrap().into(), "-q".into()];
         for (marker, key, relative) in [
@@ -210,7 +212,7 @@ fn every_config_runs_as_a_smoke_test() {
             }
         }
         if text.contains("task = \"slam\"") && text.contains("source = \"synthetic\"") {
-            let data_dir = temp_dir("smoke-slam-room");
+            let data_dir = scratch.join("room");
             for set in [
                 "synthetic.frames=6".to_string(),
                 "synthetic.width=48".to_string(),
@@ -235,7 +237,7 @@ fn every_config_runs_as_a_smoke_test() {
                 eprintln!("skipped {}: a real dataset is present", config.display());
                 continue;
             }
-            let out_dir = temp_dir("smoke-missing").join("run");
+            let out_dir = scratch.join("run");
             args.extend(["--out".into(), out_dir.to_str().unwrap().into()]);
             let args: Vec<&str> = args.iter().map(String::as_str).collect();
             let out = cpose_in(&workspace_root(), &args);
@@ -251,7 +253,7 @@ fn every_config_runs_as_a_smoke_test() {
             continue;
         }
         if text.contains("task = \"slam_imu\"") {
-            let data_dir = temp_dir("smoke-slam-imu");
+            let data_dir = scratch.join("frames");
             for set in [
                 "synthetic.frames=12".to_string(),
                 "synthetic.width=48".to_string(),
@@ -281,7 +283,7 @@ fn every_config_runs_as_a_smoke_test() {
             }
         }
         if text.contains("task = \"synth_room\"") {
-            let data_dir = temp_dir("smoke-room");
+            let data_dir = scratch.join("room");
             for set in [
                 "synthetic.frames=3".to_string(),
                 "synthetic.width=32".to_string(),
@@ -290,7 +292,7 @@ fn every_config_runs_as_a_smoke_test() {
                 args.extend(["--set".into(), set]);
             }
         }
-        let out_dir = temp_dir("smoke").join("run");
+        let out_dir = scratch.join("run");
         args.extend([
             "--set".into(),
             "run.iterations_scale=0.005".into(),

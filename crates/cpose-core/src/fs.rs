@@ -51,14 +51,12 @@ mod tests {
 
     #[test]
     fn write_atomic_replaces_file_and_leaves_no_temporary() {
-        let dir = std::env::temp_dir().join(format!("cpose-fs-test-{}", std::process::id()));
-        fs::create_dir_all(&dir).unwrap();
+        let dir = crate::testing::TempDir::new("fs");
         let path = dir.join("out.txt");
         write_atomic(&path, b"first").unwrap();
         write_atomic(&path, "second").unwrap();
         assert_eq!(fs::read_to_string(&path).unwrap(), "second");
         assert!(!dir.join("out.txt.tmp").exists());
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

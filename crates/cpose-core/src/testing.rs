@@ -1,5 +1,5 @@
-//! The conformance suite every [`PoseField`] implementation passes (enable the `testing` feature
-//! to use it from another crate's tests).
+//! The conformance suite every [`PoseField`] implementation passes, and [`TempDir`] for tests
+//! that write files (enable the `testing` feature to use them from another crate's tests).
 //!
 //! [`check_pose_field`] asserts, on a field with `f64` parameters:
 //! 1. queries outside [`PoseField::time_range`] are errors; `evaluate` and `forward` agree and
@@ -15,6 +15,9 @@
 //! Central differences use `h = 1e-4 · duration` in time (truncation `O(h²)`) and
 //! `h = 1e-6 · max(1, |θ|)` in the parameters; tolerances are relative to the magnitude of the
 //! compared quantities over the batch, see [`Tolerances`].
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use nalgebra::{Quaternion, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -460,4 +463,66 @@ pub fn check_f32_matches_f64(
         &vec_rows(&b.lin_acc_world),
         rtol,
     );
+}
+
+/// A fresh, empty folder under the system's temp dir for one test, removed with its contents
+/// when dropped — also when the test fails and unwinds. Derefs to its [`Path`].
+#[derive(Debug)]
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// Creates `cpose-{name}-{process}-{n}`, unique per process and call, emptied if a crashed
+    /// run left it behind. Panics if the temp dir is not writable.
+    pub fn new(name: &str) -> Self {
+        static COUNTER: AtomicUsize = AtomicUsize::new(0);
+        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("cpose-{name}-{}-{n}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir)
+            .unwrap_or_else(|e| panic!("cannot create {}: {e}", dir.display()));
+        Self(dir)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+impl std::ops::Deref for TempDir {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for TempDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_temp_dir_is_fresh_and_removed_when_dropped() {
+        let (a, b) = (TempDir::new("temp-dir"), TempDir::new("temp-dir"));
+        assert_ne!(*a, *b);
+        std::fs::create_dir_all(a.join("sub")).unwrap();
+        std::fs::write(a.join("sub/file.txt"), "x").unwrap();
+        let path = a.to_path_buf();
+        drop(a);
+        assert!(!path.exists(), "{} is left behind", path.display());
+        assert!(b.is_dir());
+    }
 }

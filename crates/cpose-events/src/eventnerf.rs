@@ -630,12 +630,8 @@ mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
 
-    fn temp_dir(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("cpose-eventnerf-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    fn temp_dir(name: &str) -> cpose_core::testing::TempDir {
+        cpose_core::testing::TempDir::new(&format!("eventnerf-{name}"))
     }
 
     fn pose(i: usize) -> Isometry3<f64> {
@@ -746,7 +742,6 @@ mod tests {
             err.contains("train: expected a new or empty folder"),
             "{err}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -771,7 +766,6 @@ mod tests {
         assert_eq!(got, expected);
         assert_eq!(back.distortion, [-0.1, 0.02]);
         assert!(back.held_out.is_empty());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -880,6 +874,5 @@ mod tests {
         .to_string();
         assert!(m.starts_with("cannot read") && m.contains("angle2"), "{m}");
         assert!(read_eventnerf(&dir, &opts).is_ok());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -201,10 +201,8 @@ mod tests {
     use cpose_core::Timestamp;
     use cpose_nerf::data::npy::Dtype;
 
-    fn temp_dir(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("cpose-npz-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    fn temp_dir(name: &str) -> cpose_core::testing::TempDir {
+        cpose_core::testing::TempDir::new(&format!("npz-{name}"))
     }
 
     fn sample_stream() -> EventStream {
@@ -275,7 +273,6 @@ mod tests {
             ]
         );
         assert_eq!(arrays["t"].to_f64_vec()[4], 1.234567891);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -351,7 +348,6 @@ mod tests {
                 .map(|(a, _)| a),
             Some(Timestamp::from_nanos(500_000_000_000))
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Writes arrays `(name, dtype, values)` to `path` as an npz.
@@ -469,7 +465,6 @@ mod tests {
         assert!(error_of(&path).contains("entry \"x.npy\": expected an NPY file"));
         std::fs::remove_file(&path).unwrap();
         assert!(error_of(&path).starts_with("cannot read"));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -495,7 +490,6 @@ mod tests {
             report.to_string(),
             "5 events read, 3 dropped outside the sensor (first: event 1: (6, 0))"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Runs `python3 -c script args…`; `None` (skipped) when python3 or one of `modules` is
@@ -556,7 +550,6 @@ with zipfile.ZipFile(sys.argv[1]) as src, zipfile.ZipFile(sys.argv[2], "w", comp
             read_events_npz(&theirs, &opts).unwrap(),
             read_events_npz(&ours, &opts).unwrap()
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// numpy itself: `np.savez_compressed` files are read, and `np.load` reads ours. Skipped
@@ -594,6 +587,5 @@ np.savez_compressed(sys.argv[2], x=x, y=y, t=t, p=p, extra=np.eye(3, dtype=np.fl
         let arrays = read_npz(&theirs).unwrap();
         assert_eq!(arrays["extra"].shape(), [3, 3]);
         assert_eq!(arrays["extra"].to_f64_vec()[4], 1.0);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -707,8 +707,7 @@ mod tests {
 
     #[test]
     fn a_synthetic_dataset_is_written_and_read_back() {
-        let dir = std::env::temp_dir().join(format!("cpose-sim-dataset-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = cpose_core::testing::TempDir::new("sim-dataset");
         let config = SyntheticEventsConfig {
             camera: small_camera(),
             render_steps: 60,
@@ -745,6 +744,5 @@ mod tests {
             read.held_out[0].image.height(),
         );
         assert_eq!((w, h), (config.camera.width, config.camera.height));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -144,10 +144,8 @@ pub fn write_events_text(
 mod tests {
     use super::*;
 
-    fn temp_dir(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("cpose-text-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    fn temp_dir(name: &str) -> cpose_core::testing::TempDir {
+        cpose_core::testing::TempDir::new(&format!("text-{name}"))
     }
 
     #[test]
@@ -203,7 +201,6 @@ mod tests {
         assert!(text.starts_with("# t x y p"), "{text}");
         assert!(text.contains("\n-0.000000005 0 0 1\n"), "{text}");
         assert!(text.ends_with("\n1403715273.262142976 3 2 -1\n"), "{text}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -220,7 +217,6 @@ mod tests {
         assert_eq!(s.x(), [33, 158, 88]);
         assert_eq!(s.p(), [1, 1, -1]);
         assert_eq!(report.polarity, PolarityCoding::ZeroOne);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -285,6 +281,5 @@ mod tests {
             m.starts_with("cannot read") && m.contains("none.txt"),
             "{m}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -721,11 +721,8 @@ fn decode(path: &Path) -> Result<::image::DynamicImage, ImageError> {
 mod tests {
     use super::*;
 
-    fn temp_dir(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("cpose-image-test-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    fn temp_dir(name: &str) -> cpose_core::testing::TempDir {
+        cpose_core::testing::TempDir::new(&format!("image-{name}"))
     }
 
     #[test]
@@ -825,7 +822,6 @@ mod tests {
         out_of_range.save_png(&path).unwrap();
         let back = Image::load(&path).unwrap();
         assert_eq!(back.pixel(0, 0), [0.0, 1.0, 128.0 / 255.0]);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -852,7 +848,6 @@ mod tests {
             (p[0] - 200.0 / 255.0).abs() < 0.02 && (p[2] - 50.0 / 255.0).abs() < 0.02,
             "{p:?}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -869,7 +864,6 @@ mod tests {
                 .all(|(a, b)| (a - b).abs() < 1e-6),
             "{img:?}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -912,7 +906,6 @@ mod tests {
             matches!(err, ImageError::Decode { format: "PNG", .. }),
             "{err}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -526,8 +526,7 @@ mod tests {
             colors: vec![[255, 0, 0]; 3],
             triangles: vec![[0, 1, 2]],
         };
-        let dir = std::env::temp_dir().join(format!("cpose-mesh-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = cpose_core::testing::TempDir::new("mesh");
         let path = dir.join("m.ply");
         mesh.write_ply(&path).unwrap();
         let bytes = std::fs::read(&path).unwrap();
@@ -537,7 +536,6 @@ mod tests {
         assert!(header.contains("element vertex 3\n") && header.contains("element face 1\n"));
         assert!(header.contains("property uchar red\n"));
         assert_eq!(bytes.len() - at, 3 * (12 + 3) + (1 + 12));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -176,8 +176,7 @@ mod tests {
     /// `.ci/requirements.txt`).
     #[test]
     fn ssim_matches_scikit_image() {
-        let dir = std::env::temp_dir().join(format!("cpose-ssim-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = cpose_core::testing::TempDir::new("ssim");
         let (pa, pb) = (dir.join("a.png"), dir.join("b.png"));
         smooth(64, 48, 0.0).save_png(&pa).unwrap();
         // A shifted phase plus a fine deterministic pattern, so the SSIM is well below 1.
@@ -205,7 +204,6 @@ mod tests {
             .arg(&pa)
             .arg(&pb)
             .output();
-        std::fs::remove_dir_all(&dir).unwrap();
         let in_ci = std::env::var_os("CI").is_some();
         let output = match output {
             Ok(o) if o.status.success() => o,

@@ -211,8 +211,7 @@ mod tests {
 
     #[test]
     fn malformed_json_errors_name_the_file() {
-        let dir = std::env::temp_dir().join(format!("cpose-blender-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = cpose_core::testing::TempDir::new("blender");
         let json = dir.join("transforms_train.json");
         std::fs::write(&json, r#"{"frames": []}"#).unwrap();
         let err = load_blender(&dir, &BlenderOptions::default())
@@ -236,6 +235,5 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("at least one image"), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -247,11 +247,8 @@ mod tests {
     use super::*;
     use nalgebra::Point3;
 
-    fn temp_dir(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("cpose-llff-test-{name}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    fn temp_dir(name: &str) -> cpose_core::testing::TempDir {
+        cpose_core::testing::TempDir::new(&format!("llff-{name}"))
     }
 
     /// An NPY v1 file with the given header dict and values.
@@ -320,7 +317,6 @@ mod tests {
         assert!(err.contains("data bytes"), "{err}");
         std::fs::write(&path, b"not numpy at all").unwrap();
         assert!(read_npy_f64_matrix(&path, 17).is_err());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -370,14 +366,12 @@ mod tests {
         // Missing npy.
         let err = load_llff(dir.join("nowhere"), 4).unwrap_err().to_string();
         assert!(err.contains("poses_bounds.npy"), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// A fresh valid scene: `n` rows and `n` textured `10×8` PNGs `image000.png, …` in
     /// `images_8/`.
-    fn valid_scene(name: &str, n: usize) -> PathBuf {
+    fn valid_scene(name: &str, n: usize) -> cpose_core::testing::TempDir {
         let dir = temp_dir(name);
-        std::fs::remove_dir_all(&dir).unwrap();
         let folder = dir.join("images_8");
         std::fs::create_dir_all(&folder).unwrap();
         let values: Vec<f64> = (0..n).flat_map(|i| row([i as f64, 0.0, 0.0])).collect();
@@ -475,7 +469,6 @@ mod tests {
 
         std::fs::write(&image1, &good_png).unwrap();
         assert_eq!(load_llff(&dir, 8).unwrap().len(), 3);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// The COLMAP sparse points of fern (`sparse/0/points3D.bin`): per point `u64 id, 3 × f64

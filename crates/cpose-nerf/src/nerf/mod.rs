@@ -1076,11 +1076,7 @@ mod tests {
     /// Runs 8 steps with a checkpoint every `every`, the field turning NaN at step `poison_at`;
     /// returns the error message and the checkpoint file's content, if any.
     fn diverging_run(every: usize, poison_at: usize) -> (String, Option<Vec<u8>>) {
-        let dir = std::env::temp_dir().join(format!(
-            "cpose-nerf-diverge-{}-{every}-{poison_at}",
-            std::process::id()
-        ));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = cpose_core::testing::TempDir::new(&format!("nerf-diverge-{every}-{poison_at}"));
         let checkpoint = dir.join("checkpoint_barf.bin");
         let mut tiny = Tiny::new();
         let inner = tiny.field;
@@ -1106,7 +1102,6 @@ mod tests {
         assert_eq!(losses.len(), poison_at, "{losses:?}");
         let message = format!("{err:#}").replace(&dir.display().to_string(), "DIR");
         let saved = std::fs::read(&checkpoint).ok();
-        std::fs::remove_dir_all(&dir).unwrap();
         (message, saved)
     }
 

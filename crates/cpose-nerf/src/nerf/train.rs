@@ -443,8 +443,7 @@ pub(super) mod tests {
     /// Issue "a NaN loss — one clear message, the last good checkpoint kept".
     #[test]
     fn a_non_finite_loss_stops_the_step_and_keeps_the_last_checkpoint() {
-        let dir = std::env::temp_dir().join(format!("cpose-nerf-nan-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = cpose_core::testing::TempDir::new("nerf-nan");
         let path = dir.join("checkpoint.bin");
         let mut tiny = Tiny::new();
         let mut trainer = tiny.trainer(10);
@@ -470,6 +469,5 @@ pub(super) mod tests {
         assert_eq!(err.lines().count(), 1, "{err}");
         assert_eq!(std::fs::read(&path).unwrap(), saved);
         assert_eq!(trainer.last_checkpoint(), Some((path.as_path(), 3)));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

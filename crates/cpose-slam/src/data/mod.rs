@@ -444,11 +444,8 @@ fn numbered_files(
     Ok(found.into_iter().map(|(_, p)| p).collect())
 }
 
-/// A fresh empty folder for one test.
+/// A fresh empty folder for one test, removed when it ends.
 #[cfg(test)]
-pub(crate) fn test_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("cpose-slam-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp folder");
-    dir
+pub(crate) fn test_dir(name: &str) -> cpose_core::testing::TempDir {
+    cpose_core::testing::TempDir::new(&format!("slam-{name}"))
 }
