@@ -812,10 +812,6 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Steps `trainer` through iterations `0..iterations`, passing each loss to `on_loss`, and
-/// writes `checkpoint` after every `checkpoint_every` steps (0: never). A failed step or
-/// checkpoint ends the run with one error naming the method and the last good checkpoint (a
-/// diverged state never overwrites it, see [`Trainer::save_checkpoint`]) or saying there is none.
 /// How many views see the point `centre` inside the image from their true pose but not from
 /// their initial one. Noise that turns cameras about the scene keeps it in view; a shift across
 /// the view direction moves it towards the border and beyond.
@@ -839,6 +835,10 @@ fn centre_leaves_view(
         .count()
 }
 
+/// Steps `trainer` through iterations `0..iterations`, passing each loss to `on_loss`, and
+/// writes `checkpoint` after every `checkpoint_every` steps (0: never). A failed step or
+/// checkpoint ends the run with one error naming the method and the last good checkpoint (a
+/// diverged state never overwrites it, see [`Trainer::save_checkpoint`]) or saying there is none.
 fn train_steps(
     trainer: &mut Trainer<'_>,
     method: Method,
@@ -1105,8 +1105,6 @@ mod tests {
         (message, saved)
     }
 
-    /// Issue "a NaN loss — one clear message, the last good checkpoint kept": the task's error
-    /// names the method, the iteration and the checkpoint that is still good.
     #[test]
     fn a_sideways_shift_moves_the_centre_out_of_view_and_a_turn_about_it_does_not() {
         // 100×100 at 40°: at 4 units the image spans ±1.46 across the view.
@@ -1124,6 +1122,8 @@ mod tests {
         assert_eq!(moved(Isometry3::translation(0.0, 0.0, 5.0)), 1);
     }
 
+    /// Issue "a NaN loss — one clear message, the last good checkpoint kept": the task's error
+    /// names the method, the iteration and the checkpoint that is still good.
     #[test]
     fn a_nan_loss_ends_training_with_one_line_naming_the_last_good_checkpoint() {
         let (message, saved) = diverging_run(2, 5);
