@@ -562,6 +562,44 @@ fn slam_resumes_after_kill_9_with_the_uninterrupted_trajectory() {
         !checkpoint.exists(),
         "a finished method's checkpoint is removed"
     );
+    // The per-frame tracking log: a row per tracked frame, the rows from before the kill kept
+    // and none twice; its errors are those of the trajectory.
+    let rows = |dir: &Path| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(dir.join("tracking_prev.csv")).unwrap();
+        let mut lines = text.lines();
+        assert!(
+            lines
+                .next()
+                .unwrap()
+                .starts_with("frame,time_s,start_error_cm,error_cm,")
+        );
+        lines
+            .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+            .collect()
+    };
+    let (whole_rows, cut_rows) = (rows(&whole), rows(&cut));
+    let frames: Vec<f64> = whole_rows.iter().map(|r| r[0]).collect();
+    assert_eq!(frames, (1..24).map(f64::from).collect::<Vec<_>>());
+    assert_eq!(whole_rows.len(), cut_rows.len());
+    for (x, y) in whole_rows.iter().zip(&cut_rows) {
+        for (u, v) in x.iter().zip(y) {
+            assert!(
+                (u - v).abs() <= 2e-3 * (1.0 + u.abs()),
+                "{x:?} against {y:?}"
+            );
+        }
+    }
+    let gt = eval::read_tum(whole.join("traj_gt.txt")).unwrap();
+    for r in &whole_rows {
+        let (i, start_cm, cm, moved_cm) = (r[0] as usize, r[2], r[3], r[6]);
+        let truth = 100.0 * (a.poses()[i].translation.vector - gt.poses()[i].translation.vector);
+        assert!(
+            (cm - truth.norm()).abs() < 2e-3,
+            "frame {i}: {cm} against {truth}"
+        );
+        // The start is where tracking began: the two errors differ by at most the move.
+        assert!((cm - start_cm).abs() <= moved_cm + 2e-3, "frame {i}: {r:?}");
+    }
 }
 
 /// A TUM RGB-D folder without `groundtruth.txt` runs: the trajectory is written, the ATE is

@@ -87,6 +87,8 @@ impl Default for MappingConfig {
 /// What one tracked frame reports.
 #[derive(Clone, Copy, Debug)]
 pub struct TrackReport {
+    /// `world_from_camera` the frame started from: the pose model's prediction.
+    pub start: Isometry3<f64>,
     /// Best tracking loss.
     pub loss: f64,
     /// Distance of the chosen pose from the starting prediction, metres.
@@ -317,6 +319,7 @@ impl Slam {
         let moved = (body.translation.vector - start.translation.vector).norm();
         let depth_error = best.2;
         Ok(TrackReport {
+            start: start * mount,
             loss: best.0 / self.tracking.pixels as f64,
             moved,
             depth_error,

@@ -6,12 +6,15 @@
 //! the ATE (SE(3) alignment, as `cpose eval ate`), a top-down plot and a rendered view.
 
 use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write as _};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use cpose_core::TimeRange;
 use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, write_tum};
+use cpose_core::geometry::rotation_angle_between;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_nerf::field3d::SceneBounds;
 use cpose_nerf::image::Image;
@@ -25,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint::{Reader, Writer};
 use crate::data::{RgbdError, RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
 use crate::map::{DENSITY_SCALE, MapConfig, NeuralMap, PixelSample};
-use crate::slam::{MappingConfig, Slam, TrackingConfig};
+use crate::slam::{MappingConfig, Slam, TrackReport, TrackingConfig};
 use crate::surface::{COMPLETION_RADIUS, score_mesh};
 use crate::synth::{RoomConfig, generate_room};
 use crate::track::{
@@ -477,8 +480,8 @@ impl SlamSetup {
 pub type ModelFactory<'a> = Box<dyn Fn() -> anyhow::Result<Box<dyn PoseModel>> + 'a>;
 
 /// Runs SLAM on the first `n` frames of `seq` once per `(key, model)` method and writes, per
-/// method, `traj_<key>.txt`, `trajectory_<key>.png`, `view_<key>.png`, `mesh_<key>.ply` and its
-/// entry in `metrics.json` (also `traj_gt.txt`). On `--resume`, methods already in
+/// method, `traj_<key>.txt`, `trajectory_<key>.png`, `view_<key>.png`, `mesh_<key>.ply`,
+/// `tracking_<key>.csv` (per frame) and its entry in `metrics.json` (also `traj_gt.txt`). On `--resume`, methods already in
 /// `metrics.json` are skipped and an interrupted one continues from its checkpoint. Returns
 /// the metrics.
 pub fn run_methods(
@@ -563,12 +566,18 @@ pub fn run_methods(
                 checkpoint.display()
             ));
         }
+        let mut tracking_log =
+            TrackingLog::open(&input.run_dir.file(format!("tracking_{key}.csv")), first)?;
         let progress = input.progress(n as u64, key.to_string());
         progress.set_position(first as u64);
         let every = setup.checkpoint_every;
         for i in first..n {
             let frame = seq.load(i)?;
+            let time = frame.time;
             let report = slam.process(frame, start, model.as_mut())?;
+            if let Some(r) = &report {
+                tracking_log.row(i, time, r, &slam.estimates[i], truth[i].as_ref())?;
+            }
             if let Some(r) = report
                 && r.lost
             {
@@ -590,6 +599,7 @@ pub fn run_methods(
                 slam.save(&mut w);
                 model.save(&mut w);
                 w.save(&checkpoint)?;
+                tracking_log.flush()?;
             }
             if (i + 1) % 100 == 0 || i + 1 == n {
                 let err = truth[i].map_or(f64::NAN, |t| {
@@ -605,6 +615,7 @@ pub fn run_methods(
             }
         }
         progress.finish();
+        tracking_log.flush()?;
         let wall_s = earlier_s + started.elapsed().as_secs_f64();
         let all = Trajectory::new(times.clone(), slam.estimates.clone())?;
         write_tum(input.run_dir.file(format!("traj_{}.txt", key)), &all)?;
@@ -684,6 +695,84 @@ pub fn run_methods(
         let _ = std::fs::remove_file(&checkpoint);
     }
     Ok(results)
+}
+
+/// `tracking_<method>.csv`: one row per tracked frame, where the pose model started it and
+/// where tracking left it; with a ground truth, how far each was from the true camera. It tells
+/// a prediction that was already off from a tracking that moved a good start away.
+struct TrackingLog {
+    path: PathBuf,
+    file: BufWriter<File>,
+}
+
+impl TrackingLog {
+    const HEADER: &str = "frame,time_s,start_error_cm,error_cm,start_rotation_error_deg,\
+                          rotation_error_deg,moved_cm,depth_error_cm,loss,lost";
+
+    /// Creates `path`; a resumed run (`first > 0`) keeps the rows of the frames before `first`.
+    fn open(path: &Path, first: usize) -> anyhow::Result<Self> {
+        let kept: Vec<String> = match first {
+            0 => Vec::new(),
+            _ => std::fs::read_to_string(path)
+                .unwrap_or_default()
+                .lines()
+                .skip(1)
+                .filter(|line| {
+                    let frame = line.split(',').next().and_then(|f| f.parse::<usize>().ok());
+                    frame.is_some_and(|f| f < first)
+                })
+                .map(str::to_owned)
+                .collect(),
+        };
+        let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut log = Self {
+            path: path.to_owned(),
+            file: BufWriter::new(file),
+        };
+        log.write(format_args!("{}", Self::HEADER))?;
+        for line in &kept {
+            log.write(format_args!("{line}"))?;
+        }
+        Ok(log)
+    }
+
+    /// The row of frame `index` at `time`: its report, the chosen `estimate` and the `truth`.
+    fn row(
+        &mut self,
+        index: usize,
+        time: f64,
+        report: &TrackReport,
+        estimate: &Isometry3<f64>,
+        truth: Option<&Isometry3<f64>>,
+    ) -> anyhow::Result<()> {
+        let errors = |pose: &Isometry3<f64>| {
+            truth.map_or((f64::NAN, f64::NAN), |t| {
+                (
+                    100.0 * (pose.translation.vector - t.translation.vector).norm(),
+                    rotation_angle_between(&pose.rotation, &t.rotation).to_degrees(),
+                )
+            })
+        };
+        let (start_cm, start_deg) = errors(&report.start);
+        let (cm, deg) = errors(estimate);
+        self.write(format_args!(
+            "{index},{time:.6},{start_cm:.3},{cm:.3},{start_deg:.4},{deg:.4},{:.3},{:.3},{:.6},{}",
+            100.0 * report.moved,
+            100.0 * report.depth_error,
+            report.loss,
+            u8::from(report.lost)
+        ))
+    }
+
+    fn write(&mut self, line: std::fmt::Arguments) -> anyhow::Result<()> {
+        writeln!(self.file, "{line}").with_context(|| format!("writing {}", self.path.display()))
+    }
+
+    fn flush(&mut self) -> anyhow::Result<()> {
+        self.file
+            .flush()
+            .with_context(|| format!("writing {}", self.path.display()))
+    }
 }
 
 /// The ATE of `est` against `gt` with SE(3) alignment, as NICE-SLAM and `cpose eval ate`; a
