@@ -58,6 +58,7 @@ fn bench(c: &mut Criterion) {
             translation: decay,
             pose: decay,
             warmup: 0,
+            rotation_warmup: 0,
         },
     );
     let settings = RenderSettings {

@@ -641,11 +641,13 @@ fn run_method(
     };
     // Every method draws the same windows (`anchor_windows` among them); the anchor term acts
     // only on a correction.
+    let warmup = (train.pose_warmup * iterations as f64).round() as u64;
     let schedules = PoseSchedules {
         rotation: decay(train.posenet_lr_rotation, iterations),
         translation: decay(train.posenet_lr_translation, iterations),
         pose: decay(train.posenet_lr_translation, iterations),
-        warmup: (train.pose_warmup * iterations as f64).round() as u64,
+        warmup,
+        rotation_warmup: warmup,
     };
     let mut poses = FramePoses::new(Vec::new(), Vec::new(), correction, schedules);
     let schedule = EventSchedule {

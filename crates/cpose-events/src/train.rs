@@ -582,6 +582,7 @@ mod tests {
             translation: decay,
             pose: decay,
             warmup: 0,
+            rotation_warmup: 0,
         };
         FramePoses::new(Vec::new(), Vec::new(), None, schedules)
     }

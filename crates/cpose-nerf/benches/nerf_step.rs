@@ -104,6 +104,7 @@ fn nerf_step(c: &mut Criterion) {
                 translation: decay([1e-3, 1e-5]),
                 pose: decay([1e-3, 1e-5]),
                 warmup: 600,
+                rotation_warmup: 600,
             },
         );
         let settings = RenderSettings {
@@ -128,6 +129,8 @@ fn nerf_step(c: &mut Criterion) {
                 ("mlp".to_owned(), [1e-3, 1e-4]),
             ]),
             seed: 0,
+            field_restart_every: 0,
+            field_restart_until: 0,
         };
         let mut trainer = Trainer::new(
             field.as_mut(),

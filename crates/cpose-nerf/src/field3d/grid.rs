@@ -773,6 +773,10 @@ impl<S: Real> RadianceField<S> for HashGridField<S> {
         level_weights(progress, self.config.c2f, &mut self.weights);
     }
 
+    fn kept_on_restart(&self) -> Range<usize> {
+        self.level_range(0)
+    }
+
     fn forward(&mut self, points: &[S], sigma: &mut [S], rgb: &mut [S]) {
         let n = batch_len(points, sigma, rgb);
         let parts = parts_for(n);

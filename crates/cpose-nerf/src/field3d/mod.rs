@@ -81,6 +81,12 @@ pub trait RadianceField<S: Real = f32>: Send {
     fn param_groups(&self) -> Vec<(&'static str, Range<usize>)>;
     /// Coarse-to-fine: `progress` = fraction of training done (0–1).
     fn set_progress(&mut self, progress: f64);
+    /// The parameters a restart of the field keeps (`nerf::train::Schedule::field_restart_every`):
+    /// its coarsest part, which coarse-to-fine never turns off. The hash grid keeps its first
+    /// level; by default nothing is kept.
+    fn kept_on_restart(&self) -> Range<usize> {
+        0..0
+    }
     /// Densities and colours at `points` (`n × 3` interleaved x, y, z, world coordinates) into
     /// `sigma` (`n`) and `rgb` (`n × 3` interleaved). Keeps what `backward` needs; allocates only
     /// when n grows.

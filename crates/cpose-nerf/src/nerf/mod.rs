@@ -12,6 +12,12 @@
 //! `[train] pose_warmup` of the steps (default 10%). Before the field has learnt anything its
 //! pose gradients are noise; without the ramp PoseNet moved even the true poses by 1.3° in the
 //! first 250 steps and, at 60° / 20% noise, doubled the rotation error (31° → 62°) within 500.
+//! `[train] rotation_warmup` gives PoseNet's rotation network a ramp of its own.
+//!
+//! An option beyond the paper for large noise: `[train] field_restart_every = K` restarts the
+//! field every `K` steps up to `field_restart_until` (a fraction of the steps) while the poses
+//! keep their state ([`train`]). At 60° + 10% the field otherwise fits the wrong poses and holds
+//! them there (a consistent but wrong pair).
 //!
 //! The field's region (and, for bounded scenes, the sphere rays are clipped to) is the scene's
 //! bounding ball widened by the largest shift the initial poses give the scene
@@ -228,6 +234,13 @@ struct TrainConfig {
     /// the paper: while the field is blank its pose gradients are noise; see
     /// [`PoseSchedules::warmup`]).
     pose_warmup: f64,
+    /// The same for PoseNet's rotation network alone (default: `pose_warmup`).
+    rotation_warmup: Option<f64>,
+    /// Restart the field every this many steps while the poses are refined (0: never;
+    /// [`train::Schedule::field_restart_every`]). Runs with fixed poses never restart.
+    field_restart_every: usize,
+    /// The fraction of the steps after which no restart begins; the last round runs to the end.
+    field_restart_until: f64,
     /// Spline: frames per control pose.
     spline_frames_per_control: f64,
     /// Checkpoint every this many steps (0: never).
@@ -250,6 +263,9 @@ impl Default for TrainConfig {
             posenet_lr_rotation: [2e-4, 1e-6],
             lr_pose: [1e-3, 1e-5],
             pose_warmup: 0.1,
+            rotation_warmup: None,
+            field_restart_every: 0,
+            field_restart_until: 1.0,
             spline_frames_per_control: 5.0,
             checkpoint_every: 1000,
             log_every: 500,
@@ -632,11 +648,14 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         PoseNoise::default()
     };
     noise.validate()?;
-    if !(0.0..=1.0).contains(&exp.train.pose_warmup) {
-        bail!(
-            "train.pose_warmup = {} must lie in [0, 1] (a fraction of the steps)",
-            exp.train.pose_warmup
-        );
+    for (key, value) in [
+        ("pose_warmup", Some(exp.train.pose_warmup)),
+        ("rotation_warmup", exp.train.rotation_warmup),
+        ("field_restart_until", Some(exp.train.field_restart_until)),
+    ] {
+        if let Some(value) = value.filter(|v| !(0.0..=1.0).contains(v)) {
+            bail!("train.{key} = {value} must lie in [0, 1] (a fraction of the steps)");
+        }
     }
     let initial = noise.apply(&views.train_truth, views.diameter);
     let widened = views.bounds.widened_for(&views.train_truth, &initial);
@@ -665,6 +684,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     }
     let seed = input.run.seed;
     let iterations = input.run.iterations(exp.train.iterations);
+    let steps = |fraction: f64| (fraction * iterations as f64).round() as u64;
     let train = &exp.train;
     input.run_dir.log(format_args!(
         "{}: {} training views of {}×{}, {} held out; field {}; noise {:?}; {} steps of {} rays × {} samples; methods {:?}",
@@ -717,7 +737,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             rotation: decay(train.posenet_lr_rotation, iterations),
             translation: decay(train.posenet_lr_translation, iterations),
             pose: decay(train.lr_pose, iterations),
-            warmup: (train.pose_warmup * iterations as f64).round() as u64,
+            warmup: steps(train.pose_warmup),
+            rotation_warmup: steps(train.rotation_warmup.unwrap_or(train.pose_warmup)),
         };
         let mut poses = FramePoses::new(
             init,
@@ -730,6 +751,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             rays_per_step: train.rays_per_step,
             field_lr: train.lr_field.clone(),
             seed,
+            field_restart_every: if poses.is_trainable() {
+                train.field_restart_every as u64
+            } else {
+                0
+            },
+            field_restart_until: steps(train.field_restart_until),
         };
         let progress = input.progress(iterations as u64, method.key());
         let checkpoint = input

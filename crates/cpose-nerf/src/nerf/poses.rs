@@ -33,16 +33,33 @@ pub struct PoseSchedules {
     /// Steps over which every rate ramps up linearly from 0 (0: none). While the field is
     /// still blank its pose gradients are noise, which moves even true poses by degrees.
     pub warmup: u64,
+    /// Steps over which the rotation rates ramp up instead (PoseNet's rotation network; per-frame
+    /// and spline parameters, which move both, follow `warmup`).
+    pub rotation_warmup: u64,
 }
 
 impl PoseSchedules {
     /// The factor of the warm-up at iteration `it`: `min(1, (it + 1) / warmup)`.
     pub fn warmup_factor(&self, it: u64) -> f64 {
-        if self.warmup == 0 {
-            1.0
-        } else {
-            ((it + 1) as f64 / self.warmup as f64).min(1.0)
+        ramp(it, self.warmup)
+    }
+
+    /// The learning rate of `kind`'s parameters at iteration `it`, warm-up included.
+    pub fn lr(&self, kind: ParamKind, it: u64) -> f64 {
+        match kind {
+            ParamKind::Rotation => ramp(it, self.rotation_warmup) * self.rotation.lr(it),
+            ParamKind::Translation => ramp(it, self.warmup) * self.translation.lr(it),
+            ParamKind::Pose => ramp(it, self.warmup) * self.pose.lr(it),
         }
+    }
+}
+
+/// `min(1, (it + 1) / steps)`, 1 when `steps` is 0.
+fn ramp(it: u64, steps: u64) -> f64 {
+    if steps == 0 {
+        1.0
+    } else {
+        ((it + 1) as f64 / steps as f64).min(1.0)
     }
 }
 
@@ -149,14 +166,8 @@ impl FramePoses {
         self.grad.fill(0.0);
         c.backward(&self.times, &self.cotangent, &mut self.grad)?;
         let s = self.schedules;
-        let ramp = s.warmup_factor(it);
-        self.adam.step_pose_field(c.as_mut(), &self.grad, |kind| {
-            ramp * match kind {
-                ParamKind::Rotation => s.rotation.lr(it),
-                ParamKind::Translation => s.translation.lr(it),
-                ParamKind::Pose => s.pose.lr(it),
-            }
-        });
+        self.adam
+            .step_pose_field(c.as_mut(), &self.grad, |kind| s.lr(kind, it));
         Ok(())
     }
 
@@ -206,7 +217,7 @@ mod tests {
     }
 
     #[test]
-    fn warmup_ramps_linearly_to_one() {
+    fn warmups_ramp_linearly_to_one_the_rotation_over_its_own_steps() {
         let decay = ExponentialDecay {
             lr0: 1e-3,
             lr_end: 1e-5,
@@ -217,9 +228,15 @@ mod tests {
             translation: decay,
             pose: decay,
             warmup: 4,
+            rotation_warmup: 8,
         };
         let factors: Vec<f64> = (0..6).map(|it| s.warmup_factor(it)).collect();
         assert_eq!(factors, [0.25, 0.5, 0.75, 1.0, 1.0, 1.0]);
+        let rate = |kind, it| s.lr(kind, it) / decay.lr(it);
+        assert!((rate(ParamKind::Translation, 1) - 0.5).abs() < 1e-12);
+        assert!((rate(ParamKind::Pose, 1) - 0.5).abs() < 1e-12);
+        assert!((rate(ParamKind::Rotation, 1) - 0.25).abs() < 1e-12);
+        assert!((rate(ParamKind::Rotation, 7) - 1.0).abs() < 1e-12);
         s.warmup = 0;
         assert_eq!(s.warmup_factor(0), 1.0);
     }

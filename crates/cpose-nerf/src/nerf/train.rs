@@ -5,6 +5,14 @@
 //! poses with jittered depths, and takes one Adam step on the field (per parameter group) and
 //! one on the pose correction, from the mean squared colour error
 //! `L = 1/(3R) Σ_r ‖C_r − y_r‖²`.
+//!
+//! Field restarts ([`Schedule::field_restart_every`], not in the paper or BARF): every `K`
+//! steps the field goes back to its initial parameters except its coarsest part
+//! ([`RadianceField::kept_on_restart`], the hash grid's first level), the poses keep their
+//! state, and each round runs the field's coarse-to-fine schedule and learning-rate decay
+//! afresh. A field whose fine levels have converged on wrong poses holds them there; in each
+//! round's coarse phase the poses move on, and the kept coarse level carries the scene's shape
+//! from one round to the next.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -33,9 +41,32 @@ pub struct Schedule {
     pub field_lr: BTreeMap<String, [f64; 2]>,
     /// Seed of the pixel and depth draws.
     pub seed: u64,
+    /// Restart the field every this many steps (0: never) ...
+    pub field_restart_every: u64,
+    /// ... up to this step: the last restart is the last multiple of `field_restart_every`
+    /// at or before it and before `iterations`, and its round runs to the end ([`field_round`]).
+    pub field_restart_until: u64,
 }
 
-/// One training run's state (coarse-to-fine progress is `it / iterations`).
+/// The field's round at iteration `it`, `(first step, steps)`: the field restarts at `k·every`
+/// for every `k ≥ 1` with `k·every ≤ until` and `k·every < iterations`; the last round runs to
+/// the end. One round of all `iterations` when `every` is 0 or no restart falls in range.
+pub fn field_round(it: u64, every: u64, until: u64, iterations: u64) -> (u64, u64) {
+    if every == 0 {
+        return (0, iterations);
+    }
+    let last = (until.min(iterations.saturating_sub(1)) / every) * every;
+    let start = (it / every * every).min(last);
+    let end = if start == last {
+        iterations
+    } else {
+        start + every
+    };
+    (start, end - start)
+}
+
+/// One training run's state (the field's coarse-to-fine progress is the step's place in its
+/// [`field_round`]; the poses' is `it / iterations`).
 pub struct Trainer<'a> {
     field: &'a mut dyn RadianceField,
     poses: &'a mut FramePoses,
@@ -56,6 +87,8 @@ pub struct Trainer<'a> {
     grad_params: Vec<f32>,
     pose_grads: Vec<PoseGradient>,
     pose_cotangents: Vec<(Quaternion<f64>, Vector3<f64>)>,
+    /// The field's parameters before the first step, for restarts (empty without them).
+    initial_field: Vec<f32>,
 }
 
 impl<'a> Trainer<'a> {
@@ -75,9 +108,21 @@ impl<'a> Trainer<'a> {
                 poses.times().len()
             );
         }
-        let optimizer = FieldOptimizer::new(&*field, &schedule.field_lr, schedule.iterations)?;
+        let (_, first_round) = field_round(
+            0,
+            schedule.field_restart_every,
+            schedule.field_restart_until,
+            schedule.iterations,
+        );
+        let optimizer = FieldOptimizer::new(&*field, &schedule.field_lr, first_round)?;
         let n = field.num_params();
+        let restarts = first_round < schedule.iterations;
         Ok(Self {
+            initial_field: if restarts {
+                field.params().to_vec()
+            } else {
+                Vec::new()
+            },
             optimizer,
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
@@ -106,7 +151,22 @@ impl<'a> Trainer<'a> {
     /// One step at iteration `it`; returns the loss (mean squared error) before the step.
     pub fn step(&mut self, it: u64) -> anyhow::Result<f64> {
         let progress = it as f64 / self.schedule.iterations.max(1) as f64;
-        self.field.set_progress(progress);
+        let (start, steps) = field_round(
+            it,
+            self.schedule.field_restart_every,
+            self.schedule.field_restart_until,
+            self.schedule.iterations,
+        );
+        if it == start && it > 0 && !self.initial_field.is_empty() {
+            let kept = self.field.kept_on_restart();
+            let params = self.field.params_mut();
+            params[..kept.start].copy_from_slice(&self.initial_field[..kept.start]);
+            params[kept.end..].copy_from_slice(&self.initial_field[kept.end..]);
+            self.optimizer.restart(steps);
+        }
+        let field_it = it - start;
+        self.field
+            .set_progress(field_it as f64 / steps.max(1) as f64);
         let poses = self.poses.update(progress)?;
         let (w, h) = (self.camera.width, self.camera.height);
         let per_image = (self.schedule.rays_per_step / self.images.len()).clamp(1, w * h);
@@ -157,7 +217,8 @@ impl<'a> Trainer<'a> {
             &mut self.grad_params,
             trainable.then_some(&mut self.pose_grads[..]),
         );
-        self.optimizer.step(&mut *self.field, &self.grad_params, it);
+        self.optimizer
+            .step(&mut *self.field, &self.grad_params, field_it);
         if trainable {
             self.pose_cotangents.clear();
             for (g, pose) in self.pose_grads.iter().zip(self.poses.current()) {
@@ -224,6 +285,15 @@ impl FieldOptimizer {
             groups,
             adam: Adam::new(field.num_params()),
         })
+    }
+
+    /// Starts afresh for a round of `iterations` steps: Adam's moments cleared, every decay
+    /// stretched over the round.
+    pub fn restart(&mut self, iterations: u64) {
+        self.adam.reset();
+        for (_, decay) in &mut self.groups {
+            decay.max_iter = iterations;
+        }
     }
 
     /// One Adam step of every group from the gradient `grad` at iteration `it`.
@@ -349,6 +419,7 @@ pub(super) mod tests {
                         translation: decay(1e-3),
                         pose: decay(1e-3),
                         warmup: 0,
+                        rotation_warmup: 0,
                     },
                 ),
                 images,
@@ -358,6 +429,11 @@ pub(super) mod tests {
 
         /// A trainer of `iterations` steps of 64 rays × 16 samples, seed 0.
         pub fn trainer(&mut self, iterations: u64) -> Trainer<'_> {
+            self.trainer_restarting(iterations, 0)
+        }
+
+        /// The same with the field restarted every `every` steps to the end.
+        pub fn trainer_restarting(&mut self, iterations: u64, every: u64) -> Trainer<'_> {
             let settings = RenderSettings {
                 last_interval: LastInterval::Closed,
                 samples: 16,
@@ -376,6 +452,8 @@ pub(super) mod tests {
                     ("mlp".to_owned(), [1e-3, 1e-4]),
                 ]),
                 seed: 0,
+                field_restart_every: every,
+                field_restart_until: iterations,
             };
             Trainer::new(
                 self.field.as_mut(),
@@ -438,6 +516,72 @@ pub(super) mod tests {
         let first = losses();
         assert!(first.iter().all(|l| l.is_finite() && *l > 0.0), "{first:?}");
         assert_eq!(first, losses());
+    }
+
+    #[test]
+    fn field_rounds_restart_every_k_steps_until_the_last_which_runs_to_the_end() {
+        let rounds = |every, until, iterations| {
+            let mut starts: Vec<(u64, u64)> = (0..iterations)
+                .map(|it| field_round(it, every, until, iterations))
+                .collect();
+            starts.dedup();
+            starts
+        };
+        assert_eq!(rounds(0, 10, 10), [(0, 10)]);
+        assert_eq!(rounds(6, 5, 10), [(0, 10)]);
+        assert_eq!(rounds(5, 10, 10), [(0, 5), (5, 5)]);
+        assert_eq!(rounds(3, 10, 10), [(0, 3), (3, 3), (6, 3), (9, 1)]);
+        assert_eq!(rounds(3, 7, 10), [(0, 3), (3, 3), (6, 4)]);
+        assert_eq!(rounds(4, 3, 11), [(0, 11)]);
+        let paper = rounds(750, 4500, 6000);
+        assert_eq!(paper.len(), 7);
+        assert_eq!(paper[6], (4500, 1500));
+    }
+
+    /// A restart puts the field back to its initial parameters but for its first grid level,
+    /// with fresh Adam moments and schedules, and leaves the poses where they are. One Adam step
+    /// moves a parameter by at most its group's learning rate, so after the restart at step 2
+    /// and one more step no parameter outside the first level is further than that from its
+    /// start; three steps without the restart move some further (in the first level too), and
+    /// the per-frame poses keep the three steps they took (each at most 1e-3).
+    #[test]
+    fn a_restart_reinitialises_the_field_and_keeps_the_poses() {
+        let run = |every| {
+            let mut tiny = Tiny::new();
+            let initial = tiny.field.params().to_vec();
+            let mut trainer = tiny.trainer_restarting(4, every);
+            for it in 0..3 {
+                trainer.step(it).unwrap();
+            }
+            // Each parameter's distance from its start in steps of its learning rate.
+            let mut moved = vec![0.0f64; initial.len()];
+            for (group, range) in trainer.field.param_groups() {
+                let lr = trainer.schedule.field_lr[group][0];
+                for k in range {
+                    moved[k] = f64::from((trainer.field.params()[k] - initial[k]).abs()) / lr;
+                }
+            }
+            let first = trainer.field.kept_on_restart();
+            let furthest =
+                |ks: &mut dyn Iterator<Item = usize>| ks.map(|k| moved[k]).fold(0.0, f64::max);
+            let coarse = furthest(&mut first.clone());
+            let rest = furthest(&mut (0..first.start).chain(first.end..moved.len()));
+            let poses = trainer
+                .poses
+                .params()
+                .iter()
+                .fold(0.0f32, |m, v| m.max(v.abs()));
+            (coarse, rest, poses)
+        };
+        let (coarse, rest, poses) = run(0);
+        let (restarted_coarse, restarted_rest, restarted_poses) = run(2);
+        assert!(coarse > 1.5 && rest > 1.5, "{coarse} {rest}");
+        assert!(restarted_coarse > 1.5, "{restarted_coarse}");
+        assert!(restarted_rest <= 1.0 + 1e-3, "{restarted_rest}");
+        assert!(
+            poses > 1.5e-3 && restarted_poses > 1.5e-3,
+            "{poses} {restarted_poses}"
+        );
     }
 
     /// Issue "a NaN loss — one clear message, the last good checkpoint kept".
