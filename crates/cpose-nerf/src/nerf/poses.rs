@@ -39,11 +39,6 @@ pub struct PoseSchedules {
 }
 
 impl PoseSchedules {
-    /// The factor of the warm-up at iteration `it`: `min(1, (it + 1) / warmup)`.
-    pub fn warmup_factor(&self, it: u64) -> f64 {
-        ramp(it, self.warmup)
-    }
-
     /// The learning rate of `kind`'s parameters at iteration `it`, warm-up included.
     pub fn lr(&self, kind: ParamKind, it: u64) -> f64 {
         match kind {
@@ -54,7 +49,7 @@ impl PoseSchedules {
     }
 }
 
-/// `min(1, (it + 1) / steps)`, 1 when `steps` is 0.
+/// The warm-up factor at iteration `it`, `min(1, (it + 1) / steps)`; 1 when `steps` is 0.
 fn ramp(it: u64, steps: u64) -> f64 {
     if steps == 0 {
         1.0
@@ -223,22 +218,21 @@ mod tests {
             lr_end: 1e-5,
             max_iter: 100,
         };
-        let mut s = PoseSchedules {
+        let s = PoseSchedules {
             rotation: decay,
             translation: decay,
             pose: decay,
             warmup: 4,
             rotation_warmup: 8,
         };
-        let factors: Vec<f64> = (0..6).map(|it| s.warmup_factor(it)).collect();
+        let factors: Vec<f64> = (0..6).map(|it| ramp(it, s.warmup)).collect();
         assert_eq!(factors, [0.25, 0.5, 0.75, 1.0, 1.0, 1.0]);
         let rate = |kind, it| s.lr(kind, it) / decay.lr(it);
         assert!((rate(ParamKind::Translation, 1) - 0.5).abs() < 1e-12);
         assert!((rate(ParamKind::Pose, 1) - 0.5).abs() < 1e-12);
         assert!((rate(ParamKind::Rotation, 1) - 0.25).abs() < 1e-12);
         assert!((rate(ParamKind::Rotation, 7) - 1.0).abs() < 1e-12);
-        s.warmup = 0;
-        assert_eq!(s.warmup_factor(0), 1.0);
+        assert_eq!(ramp(0, 0), 1.0);
     }
 
     /// The loss of `(q_c, t_c) ∘ init` with the composition written on raw quaternions,

@@ -533,9 +533,9 @@ pub(super) mod tests {
         assert_eq!(rounds(3, 10, 10), [(0, 3), (3, 3), (6, 3), (9, 1)]);
         assert_eq!(rounds(3, 7, 10), [(0, 3), (3, 3), (6, 4)]);
         assert_eq!(rounds(4, 3, 11), [(0, 11)]);
-        let paper = rounds(750, 4500, 6000);
-        assert_eq!(paper.len(), 7);
-        assert_eq!(paper[6], (4500, 1500));
+        let long = rounds(750, 4500, 6000);
+        assert_eq!(long.len(), 7);
+        assert_eq!(long[6], (4500, 1500));
     }
 
     /// A restart puts the field back to its initial parameters but for its first grid level,
