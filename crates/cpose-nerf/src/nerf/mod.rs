@@ -574,6 +574,7 @@ struct MethodResult {
     trans_err_barf_fix: Option<f64>,
     /// The same errors of the initial poses (none when they all coincide: unknown poses).
     init_rot_err_deg: Option<f64>,
+    init_rot_err_relative_deg: Option<f64>,
     init_trans_err: Option<f64>,
     /// Held-out views rendered from the aligned true poses.
     psnr_db: f64,
@@ -1040,6 +1041,7 @@ fn evaluate(
         rot_err_deg_barf_fix: barf_fix.as_ref().map(|e| e.rot_err_deg),
         trans_err_barf_fix: barf_fix.as_ref().map(|e| e.trans_err),
         init_rot_err_deg: init_errors.as_ref().map(|e| e.rot_err_deg),
+        init_rot_err_relative_deg: init_errors.as_ref().map(|e| e.rot_err_relative_deg),
         init_trans_err: init_errors.as_ref().map(|e| e.trans_err),
         psnr_db: psnr / n,
         ssim: ssim_sum / n,
