@@ -134,6 +134,11 @@ pub struct RunConfig {
     /// Multiplies every iteration count of the task ([`RunConfig::iterations`]); `0.01` turns a
     /// long experiment into a smoke test.
     pub iterations_scale: f64,
+    /// Steps between two live reports of a unit (loss and key error into the log and
+    /// `curves.csv`); each task has its own default.
+    pub report_every: Option<usize>,
+    /// Seconds between two checkpoints of a unit that keeps them (for `cpose run --resume`).
+    pub checkpoint_secs: f64,
 }
 
 impl Default for RunConfig {
@@ -143,6 +148,8 @@ impl Default for RunConfig {
             threads: 2,
             out_dir: None,
             iterations_scale: 1.0,
+            report_every: None,
+            checkpoint_secs: 60.0,
         }
     }
 }

@@ -10,6 +10,7 @@
 mod real;
 mod time;
 
+pub mod checkpoint;
 pub mod config;
 pub mod eval;
 pub mod fs;
@@ -17,9 +18,11 @@ pub mod geometry;
 pub mod nn;
 pub mod pose_field;
 pub mod progress;
+pub mod provenance;
 pub mod random;
 pub mod registry;
 pub mod run_dir;
+pub mod study;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 

@@ -1,9 +1,25 @@
 //! Progress bars for long loops, drawn only when stderr is a terminal (quiet in CI and tests).
+//!
+//! Every bar of the process belongs to one [`MultiProgress`], so several units of a study can
+//! draw at once, and [`eprint_line`] prints above them instead of through them.
 
 use std::borrow::Cow;
 use std::io::IsTerminal as _;
+use std::sync::OnceLock;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// The bars of this process.
+fn bars() -> &'static MultiProgress {
+    static BARS: OnceLock<MultiProgress> = OnceLock::new();
+    BARS.get_or_init(|| MultiProgress::with_draw_target(ProgressDrawTarget::stderr()))
+}
+
+/// Prints `line` to stderr above the progress bars (which are redrawn below it), so log lines
+/// never leave fragments of a bar behind.
+pub fn eprint_line(line: &str) {
+    bars().suspend(|| eprintln!("{line}"));
+}
 
 /// Template of the bar: message, bar, position/length, elapsed and ETA.
 const TEMPLATE: &str = "{msg:>12} [{bar:30}] {pos}/{len} ({elapsed} elapsed, ETA {eta})";
@@ -17,16 +33,16 @@ pub struct Progress {
 impl Progress {
     /// A bar that draws on stderr if stderr is a terminal and `enabled`, else a hidden one.
     pub fn new(len: u64, message: impl Into<Cow<'static, str>>, enabled: bool) -> Self {
-        let target = if enabled && std::io::stderr().is_terminal() {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        };
-        let bar = ProgressBar::with_draw_target(Some(len), target);
+        let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
         if let Ok(style) = ProgressStyle::with_template(TEMPLATE) {
             bar.set_style(style.progress_chars("=> "));
         }
         bar.set_message(message);
+        let bar = if enabled && std::io::stderr().is_terminal() {
+            bars().add(bar)
+        } else {
+            bar
+        };
         Self { bar }
     }
 
@@ -55,6 +71,11 @@ impl Progress {
         self.bar.position()
     }
 
+    /// The number of steps, if set.
+    pub fn length(&self) -> Option<u64> {
+        self.bar.length()
+    }
+
     /// Sets the number of steps.
     pub fn set_length(&self, len: u64) {
         self.bar.set_length(len);
@@ -68,6 +89,7 @@ impl Progress {
     /// Removes the bar from the terminal.
     pub fn finish(&self) {
         self.bar.finish_and_clear();
+        bars().remove(&self.bar);
     }
 }
 

@@ -150,7 +150,7 @@ impl RunDir {
             self.started.elapsed().as_secs_f64()
         );
         if self.echo_log {
-            eprintln!("{line}");
+            crate::progress::eprint_line(&line);
         }
         let Ok(mut guard) = self.log.lock() else {
             return;

@@ -49,9 +49,9 @@
 //! (loose coupling in relative form, [`MotionIncrement`]).
 
 use anyhow::{Context, bail};
+use cpose_core::checkpoint::{Reader, Writer};
 use cpose_core::nn::Adam;
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, PoseNetConfig, TimeRange};
-use cpose_slam::checkpoint::{Reader, Writer};
 use cpose_slam::track::{
     MotionIncrement, NetworkObjective, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference,
 };

@@ -4,7 +4,6 @@
 
 pub use cpose_nerf;
 
-pub mod checkpoint;
 pub mod data;
 pub mod map;
 pub mod slam;

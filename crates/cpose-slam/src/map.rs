@@ -24,7 +24,7 @@ use cpose_nerf::volume::{Composited, LastInterval, Sampling};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{Reader, Writer};
+use cpose_core::checkpoint::{Reader, Writer};
 
 /// Weight of the colour term in mapping (NICE-SLAM: 0.2).
 pub const MAPPING_COLOR_WEIGHT: f32 = 0.2;

@@ -11,10 +11,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{Reader, Writer};
 use crate::data::{DepthImage, RgbdFrame};
 use crate::map::{NeuralMap, PixelSample};
 use crate::track::PoseModel;
+use cpose_core::checkpoint::{Reader, Writer};
 use cpose_nerf::mesh::{Grid, Mesh};
 
 /// Tracking settings; `[tracking]` in a config.

@@ -25,7 +25,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{Reader, Writer};
 use crate::data::{RgbdError, RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
 use crate::map::{DENSITY_SCALE, MapConfig, NeuralMap, PixelSample};
 use crate::slam::{MappingConfig, Slam, TrackReport, TrackingConfig};
@@ -35,6 +34,7 @@ use crate::track::{
     FreePose, IntrinsicConfig, IntrinsicTracker, PoseModel, PoseNetTrackConfig, PoseNetTracker,
     Reference,
 };
+use cpose_core::checkpoint::{Reader, Writer};
 
 inventory::submit! {
     Task {

@@ -27,7 +27,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{Reader, Writer};
+use cpose_core::checkpoint::{Reader, Writer};
 
 /// A parametrisation of the tracked pose.
 pub trait PoseModel: Send {

@@ -1,18 +1,30 @@
-//! A minimal binary format for SLAM checkpoints: a text header line, then little-endian
-//! values — `u64` counts and numbers, length-prefixed `f32`/`f64` arrays. Written atomically
-//! (temporary file, then rename), so a run killed at any moment keeps its last checkpoint.
+//! Checkpoints: a small binary format for the state of an interrupted run.
+//!
+//! A file is a text header line, little-endian values (`u64` counts and numbers, `f64`s,
+//! length-prefixed arrays and strings) and a CRC-32 of everything before it. Files are written
+//! atomically (temporary file, then rename), so a run killed at any moment keeps its last
+//! complete checkpoint, and [`Reader::open`] refuses a file whose checksum does not match
+//! (truncated, edited or from another program) before a single value is read.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 /// The first line of every checkpoint.
-const HEADER: &[u8] = b"cpose-slam checkpoint v2\n";
+const HEADER: &[u8] = b"cpose checkpoint v3\n";
+/// Bytes of the CRC-32 trailer.
+const CRC_LEN: usize = 4;
 
 /// Builds a checkpoint in memory.
-#[derive(Default)]
+#[derive(Debug)]
 pub struct Writer(Vec<u8>);
+
+impl Default for Writer {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 impl Writer {
     /// An empty checkpoint (with its header).
@@ -28,6 +40,12 @@ impl Writer {
     /// One float.
     pub fn f64(&mut self, v: f64) {
         self.0.extend_from_slice(&v.to_le_bytes());
+    }
+
+    /// A length-prefixed UTF-8 string.
+    pub fn str(&mut self, s: &str) {
+        self.u64(s.len() as u64);
+        self.0.extend_from_slice(s.as_bytes());
     }
 
     /// A length-prefixed array.
@@ -58,32 +76,57 @@ impl Writer {
         self.f64s(&flat);
     }
 
+    /// The file's bytes: everything written, then the CRC-32 trailer.
+    pub fn into_bytes(mut self) -> Vec<u8> {
+        let crc = crc32fast::hash(&self.0);
+        self.0.extend_from_slice(&crc.to_le_bytes());
+        self.0
+    }
+
     /// Writes the checkpoint to `path` atomically.
-    pub fn save(&self, path: &Path) -> anyhow::Result<()> {
-        cpose_core::fs::write_atomic(path, &self.0)
+    pub fn save(self, path: &Path) -> anyhow::Result<()> {
+        crate::fs::write_atomic(path, self.into_bytes())
             .with_context(|| format!("cannot write the checkpoint {}", path.display()))
     }
 }
 
 /// Reads a checkpoint written by [`Writer`].
+#[derive(Debug)]
 pub struct Reader {
     bytes: Vec<u8>,
     pos: usize,
-    path: std::path::PathBuf,
+    path: PathBuf,
 }
 
 impl Reader {
-    /// Opens `path` and checks its header.
+    /// Opens `path` and checks its header and checksum.
     pub fn open(path: &Path) -> anyhow::Result<Self> {
         let bytes =
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        Self::from_bytes(path, bytes)
+    }
+
+    /// Checks the header and checksum of `bytes` read from `path` (named in errors).
+    pub fn from_bytes(path: &Path, mut bytes: Vec<u8>) -> anyhow::Result<Self> {
         if !bytes.starts_with(HEADER) {
             bail!(
-                "{}: not a cpose-slam checkpoint (expected the header {:?})",
+                "{}: not a cpose checkpoint (expected the header {:?})",
                 path.display(),
                 String::from_utf8_lossy(HEADER).trim()
             );
         }
+        let body = bytes.len().saturating_sub(CRC_LEN).max(HEADER.len());
+        let stored = bytes
+            .get(body..)
+            .and_then(|t| <[u8; CRC_LEN]>::try_from(t).ok())
+            .map(u32::from_le_bytes);
+        if stored != Some(crc32fast::hash(&bytes[..body])) {
+            bail!(
+                "{}: the checkpoint is corrupt or truncated (its checksum does not match)",
+                path.display()
+            );
+        }
+        bytes.truncate(body);
         Ok(Self {
             pos: HEADER.len(),
             bytes,
@@ -91,10 +134,15 @@ impl Reader {
         })
     }
 
+    /// The file it was read from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     fn take(&mut self, n: usize) -> anyhow::Result<&[u8]> {
-        if self.pos + n > self.bytes.len() {
+        if n > self.bytes.len() - self.pos {
             bail!(
-                "{}: the checkpoint ends early (truncated or from another config)",
+                "{}: the checkpoint ends early (written by another config or version)",
                 self.path.display()
             );
         }
@@ -117,17 +165,26 @@ impl Reader {
         ))
     }
 
-    fn len(&mut self) -> anyhow::Result<usize> {
+    /// A length of `size`-byte items, checked against what is left of the file.
+    fn len(&mut self, size: usize) -> anyhow::Result<usize> {
         let n = self.u64()?;
         usize::try_from(n)
             .ok()
-            .filter(|&n| n <= self.bytes.len())
+            .filter(|&n| n.checked_mul(size).is_some_and(|b| b <= self.bytes.len()))
             .with_context(|| format!("{}: corrupt array length {n}", self.path.display()))
+    }
+
+    /// A string written by [`Writer::str`].
+    pub fn str(&mut self) -> anyhow::Result<String> {
+        let n = self.len(1)?;
+        let path = self.path.clone();
+        String::from_utf8(self.take(n)?.to_vec())
+            .with_context(|| format!("{}: corrupt string", path.display()))
     }
 
     /// A length-prefixed array.
     pub fn f32s(&mut self) -> anyhow::Result<Vec<f32>> {
-        let n = self.len()?;
+        let n = self.len(4)?;
         let raw = self.take(4 * n)?;
         Ok(raw
             .chunks_exact(4)
@@ -137,7 +194,7 @@ impl Reader {
 
     /// A length-prefixed array.
     pub fn f64s(&mut self) -> anyhow::Result<Vec<f64>> {
-        let n = self.len()?;
+        let n = self.len(8)?;
         let raw = self.take(8 * n)?;
         Ok(raw
             .chunks_exact(8)
@@ -175,10 +232,11 @@ impl Reader {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::TempDir;
 
     #[test]
-    fn values_round_trip_and_truncation_is_an_error() {
-        let dir = crate::data::test_dir("checkpoint");
+    fn values_round_trip_and_damage_is_refused_before_reading() {
+        let dir = TempDir::new("checkpoint");
         let path = dir.join("c.bin");
         let pose = Isometry3::from_parts(
             Translation3::new(1.0, -2.0, 0.5),
@@ -186,23 +244,30 @@ mod tests {
         );
         let mut w = Writer::new();
         w.u64(42);
+        w.str("seq-01/posenet");
         w.f32s(&[1.5, -2.25]);
         w.poses(&[pose]);
         w.save(&path).unwrap();
         let mut r = Reader::open(&path).unwrap();
         assert_eq!(r.u64().unwrap(), 42);
+        assert_eq!(r.str().unwrap(), "seq-01/posenet");
         assert_eq!(r.f32s().unwrap(), vec![1.5, -2.25]);
-        let back = r.poses().unwrap()[0];
-        assert_eq!(back, pose);
-        let bytes = std::fs::read(&path).unwrap();
-        std::fs::write(&path, &bytes[..bytes.len() - 3]).unwrap();
-        let mut r = Reader::open(&path).unwrap();
-        r.u64().unwrap();
-        r.f32s().unwrap();
-        let err = r.poses().unwrap_err().to_string();
+        assert_eq!(r.poses().unwrap()[0], pose);
+        let err = r.u64().unwrap_err().to_string();
         assert!(err.contains("ends early"), "{err}");
-        std::fs::write(&path, b"something else").unwrap();
-        let err = Reader::open(&path).err().unwrap().to_string();
-        assert!(err.contains("not a cpose-slam checkpoint"), "{err}");
+
+        let bytes = std::fs::read(&path).unwrap();
+        // Truncated at any length, or one bit flipped anywhere: refused at open.
+        for cut in [HEADER.len(), HEADER.len() + 1, bytes.len() - 1] {
+            let err = Reader::from_bytes(&path, bytes[..cut].to_vec()).unwrap_err();
+            assert!(err.to_string().contains("corrupt or truncated"), "{err}");
+        }
+        for at in [HEADER.len(), bytes.len() / 2, bytes.len() - 1] {
+            let mut flipped = bytes.clone();
+            flipped[at] ^= 0x10;
+            assert!(Reader::from_bytes(&path, flipped).is_err());
+        }
+        let err = Reader::from_bytes(&path, b"something else".to_vec()).unwrap_err();
+        assert!(err.to_string().contains("not a cpose checkpoint"), "{err}");
     }
 }
