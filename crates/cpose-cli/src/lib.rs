@@ -30,6 +30,7 @@ use cpose_core::Config;
 use cpose_core::eval::{self, Alignment};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{RunDir, RunDirOptions};
+use cpose_core::study;
 
 mod table;
 
@@ -207,6 +208,13 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
     let config = Config::load(&config_path, &args.overrides).map_err(|e| usage(e.into()))?;
     let run_config = config.run_config().map_err(|e| usage(e.into()))?;
     let task = registry::task_for(&config).map_err(|e| usage(e.into()))?;
+    if let Some(dir) = &args.resume {
+        // Studies say whether their folder can be resumed (of this task and config, unfinished)
+        // before anything runs; the folders of tasks without one resume as they can.
+        if dir.join("study.json").exists() {
+            study::check_resume(dir, task.name, &config).map_err(|e| usage(e.into()))?;
+        }
+    }
     run_config.init_thread_pool();
 
     let options = RunDirOptions {
@@ -252,8 +260,12 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
         }
         Err(err) => {
             run_dir.log(format_args!("failed: {err:#}"));
-            // A task that rejects its config (typo, unknown pose field) is a config error.
-            if err.chain().any(|e| e.is::<cpose_core::ConfigError>()) {
+            // A task that rejects its config (typo, unknown pose field) or its run folder is a
+            // usage error.
+            if err
+                .chain()
+                .any(|e| e.is::<cpose_core::ConfigError>() || e.is::<study::ResumeError>())
+            {
                 Err(Failure::Usage(err))
             } else {
                 Err(Failure::Run(err))
