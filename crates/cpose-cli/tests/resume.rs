@@ -63,8 +63,13 @@ fn metrics(dir: &Path) -> Value {
 }
 
 /// Runs `config` once uninterrupted and once killed with SIGKILL as soon as `finished` units are
-/// done and another has a checkpoint, then resumed. Returns both folders.
-fn kill_and_resume(config: &str, settings: &[&str], finished: usize) -> (TempDir, TempDir) {
+/// done (and, with `mid_unit`, another has a checkpoint), then resumed. Returns both folders.
+fn kill_and_resume(
+    config: &str,
+    settings: &[&str],
+    finished: usize,
+    mid_unit: bool,
+) -> (TempDir, TempDir) {
     let whole = temp_dir("resume-whole");
     let out = cpose(&run_args(config, settings, &whole));
     assert!(
@@ -79,7 +84,8 @@ fn kill_and_resume(config: &str, settings: &[&str], finished: usize) -> (TempDir
         .spawn()
         .unwrap();
     let started = Instant::now();
-    while count(&cut, "result.json") < finished || count(&cut, "checkpoint.bin") == 0 {
+    while count(&cut, "result.json") < finished || (mid_unit && count(&cut, "checkpoint.bin") == 0)
+    {
         assert!(
             child.try_wait().unwrap().is_none(),
             "the run finished before it could be killed"
@@ -110,7 +116,7 @@ fn kill_and_resume(config: &str, settings: &[&str], finished: usize) -> (TempDir
         done_before,
         "{log}"
     );
-    assert!(log.contains("resumed after step"), "{log}");
+    assert_eq!(log.contains("resumed after step"), mid_unit, "{log}");
     assert_eq!(metrics(&cut), metrics(&whole));
     assert_eq!(
         count(&cut, "checkpoint.bin"),
@@ -145,7 +151,7 @@ fn trajectory_resumes_after_kill_9_with_the_uninterrupted_results() {
         "run.threads=1",
         "run.checkpoint_secs=0",
     ];
-    let (whole, cut) = kill_and_resume("configs/trajectory_fit.toml", &settings, 2);
+    let (whole, cut) = kill_and_resume("configs/trajectory_fit.toml", &settings, 2, true);
     same_trajectories(&whole, &cut);
 
     // The finished folder cannot be resumed again, and an edited config is refused.
@@ -175,4 +181,22 @@ fn trajectory_resumes_after_kill_9_with_the_uninterrupted_results() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("config.toml was changed"), "{err}");
+}
+
+/// Planar units are short and keep no checkpoint: the killed unit runs again from its start.
+#[test]
+fn planar_resumes_after_kill_9_with_the_uninterrupted_results() {
+    let settings = [
+        "motion.trajectories=2",
+        "train.iterations=60",
+        "train.pixels_per_step=512",
+        "image.procedural_size=[160,120]",
+        "image.crop_px=80",
+        "run.threads=1",
+    ];
+    let (whole, cut) = kill_and_resume("configs/planar.toml", &settings, 2, false);
+    for name in ["overlay_procedural_posenet_s0.png", "curves.csv"] {
+        assert!(cut.join(name).is_file(), "{name}");
+    }
+    let _ = whole;
 }

@@ -481,13 +481,14 @@ impl<'a> Study<'a> {
         let width = rows.iter().map(|(r, _)| r.len()).max().unwrap_or(0).max(4);
         let mut s = format!("results\n{:<width$}", "unit");
         for c in &columns {
-            let _ = write!(s, " {c:>14}");
+            let _ = write!(s, "  {c:>10}");
         }
         for (name, metrics) in &rows {
             let _ = write!(s, "\n{name:<width$}");
             for c in &columns {
                 let cell = metrics.get(c).map_or(String::new(), format_value);
-                let _ = write!(s, " {cell:>14}");
+                let w = c.len().max(10);
+                let _ = write!(s, "  {cell:>w$}");
             }
         }
         s

@@ -223,13 +223,17 @@ impl<'a> Trainer<'a> {
         Ok(loss)
     }
 
-    /// Runs the remaining steps (calling `on_step` after each) and returns the last loss and
-    /// the final warp parameters per patch.
-    pub fn run(mut self, on_step: &(dyn Fn() + Sync)) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
+    /// Runs the remaining steps and returns the last loss and the final warp parameters per
+    /// patch. After each step, `on_step` gets the steps done, the step's loss and the warp
+    /// parameters that loss was computed with.
+    pub fn run(
+        mut self,
+        on_step: &mut dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()>,
+    ) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
         let mut loss = f64::NAN;
         while self.it < self.schedule.iterations {
             loss = self.step()?;
-            on_step();
+            on_step(self.it, loss, &self.params)?;
         }
         self.field.set_progress(1.0);
         self.model.warps(&mut self.params, 1.0)?;
