@@ -200,3 +200,25 @@ fn planar_resumes_after_kill_9_with_the_uninterrupted_results() {
     }
     let _ = whole;
 }
+
+/// NeRF units checkpoint their whole training state (field, poses, optimisers, generator): the
+/// killed unit continues from its last step.
+#[test]
+fn nerf_resumes_after_kill_9_with_the_uninterrupted_results() {
+    let settings = [
+        "train.iterations=60",
+        "train.rays_per_step=64",
+        "render.samples=16",
+        "eval.refine_iterations=2",
+        "eval.refine_rays=64",
+        "data.test_views=2",
+        "eval.saved_views=1",
+        "data.width=24",
+        "data.height=24",
+        "orbit.frames=12",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+    ];
+    let (whole, cut) = kill_and_resume("configs/nerf_synthetic.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+}

@@ -557,6 +557,7 @@ impl Shared<'_, '_> {
             earlier_wall_s: 0.0,
             earlier_cpu_s: 0.0,
             last_checkpoint: Instant::now(),
+            last_step: None,
             curves: Vec::new(),
             resumed: None,
         };
@@ -660,6 +661,8 @@ pub struct Unit<'a> {
     earlier_wall_s: f64,
     earlier_cpu_s: f64,
     last_checkpoint: Instant,
+    /// Steps completed at the newest checkpoint (written or resumed from).
+    last_step: Option<u64>,
     /// Curve rows not yet flushed to `units/<name>/curves.csv`.
     curves: Vec<String>,
     /// The step and the task's part of the checkpoint this unit resumes from.
@@ -743,8 +746,13 @@ impl Unit<'_> {
     }
 
     /// Saves the unit's state after `step` completed steps: `write` adds the task's values.
-    /// The previous checkpoint is kept as `checkpoint.bin.prev` until the new one is complete.
-    pub fn checkpoint(&mut self, step: u64, write: impl FnOnce(&mut Writer)) -> anyhow::Result<()> {
+    /// The previous checkpoint is kept as `checkpoint.bin.prev`; when `write` fails (say, on a
+    /// diverged state) nothing is written and its error returned.
+    pub fn checkpoint(
+        &mut self,
+        step: u64,
+        write: impl FnOnce(&mut Writer) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
         let (wall_s, cpu_s) = self.elapsed();
         let mut w = Writer::new();
         w.str(&self.hash);
@@ -752,7 +760,7 @@ impl Unit<'_> {
         w.u64(step);
         w.f64(wall_s);
         w.f64(cpu_s.unwrap_or(f64::NAN));
-        write(&mut w);
+        write(&mut w)?;
         self.flush_curves()?;
         let path = self.checkpoint_path();
         if path.is_file() {
@@ -762,7 +770,13 @@ impl Unit<'_> {
         }
         w.save(&path)?;
         self.last_checkpoint = Instant::now();
+        self.last_step = Some(step);
         Ok(())
+    }
+
+    /// The newest checkpoint of this unit and the steps it had completed, if there is one.
+    pub fn last_checkpoint(&self) -> Option<(PathBuf, u64)> {
+        self.last_step.map(|step| (self.checkpoint_path(), step))
     }
 
     /// After `cpose run --resume`: the number of steps the last checkpoint had completed and a
@@ -805,6 +819,12 @@ impl Unit<'_> {
             }
             match self.open_checkpoint(&candidate) {
                 Ok(found) => {
+                    self.last_step = Some(found.0);
+                    if candidate != path {
+                        // The damaged newest one is set aside; the older one takes its place.
+                        std::fs::rename(&candidate, &path)
+                            .with_context(|| format!("cannot restore {}", candidate.display()))?;
+                    }
                     self.resumed = Some(found);
                     return Ok(());
                 }
@@ -928,7 +948,10 @@ mod tests {
                         bail!("killed");
                     }
                     if unit.checkpoint_due() {
-                        unit.checkpoint(step as u64, |w| w.f64(error))?;
+                        unit.checkpoint(step as u64, |w| {
+                            w.f64(error);
+                            Ok(())
+                        })?;
                     }
                 }
                 let file = unit.file("traj", "txt");

@@ -622,6 +622,7 @@ impl Fit<'_> {
                     w.f64s(&imu_order.iter().map(|&i| i as f64).collect::<Vec<_>>());
                     w.u64(cursor as u64);
                     w.f64(loss);
+                    Ok(())
                 })?;
             }
         }

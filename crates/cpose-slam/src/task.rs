@@ -598,8 +598,10 @@ pub fn run_methods(
                 w.f64(earlier_s + started.elapsed().as_secs_f64());
                 slam.save(&mut w);
                 model.save(&mut w);
-                w.save(&checkpoint)?;
+                // The rows first: a kill between the two writes then loses none of the rows
+                // the checkpoint counts as done (a resume drops the later ones).
                 tracking_log.flush()?;
+                w.save(&checkpoint)?;
             }
             if (i + 1) % 100 == 0 || i + 1 == n {
                 let err = truth[i].map_or(f64::NAN, |t| {
