@@ -158,6 +158,90 @@ fn eval_ate_rejects_malformed_trajectories_with_file_and_line() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.txt"));
 }
 
+/// A run folder records which build, command line and machine made it (`provenance.json`), and
+/// `cpose table` prints its counts as integers, on stdout.
+#[test]
+fn run_records_provenance_and_table_prints_counts_as_integers() {
+    let dir = temp_dir("provenance");
+    let out_dir = dir.join("run");
+    let config = workspace_root().join("configs/trajectory_fit.toml");
+    let args = [
+        "run",
+        config.to_str().unwrap(),
+        "--set",
+        "run.iterations_scale=0.005",
+        "--set",
+        "run.threads=1",
+        "--out",
+        out_dir.to_str().unwrap(),
+        "-q",
+    ];
+    let out = cpose_in(&dir, &args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(out_dir.join("provenance.json")).unwrap();
+    let p: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let commit = &p["commit"];
+    assert!(
+        commit.is_null()
+            || commit
+                .as_str()
+                .is_some_and(|c| { c.len() == 40 && c.bytes().all(|b| b.is_ascii_hexdigit()) }),
+        "{text}"
+    );
+    assert!(p["dirty"].is_boolean() || p["dirty"].is_null(), "{text}");
+    assert_eq!(p["cpose_version"], env!("CARGO_PKG_VERSION"));
+    let command_line: Vec<&str> = p["command_line"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap())
+        .collect();
+    assert_eq!(command_line[1..], args, "{text}");
+    assert!(
+        p["machine"]["logical_cpus"]
+            .as_u64()
+            .is_some_and(|n| n >= 1),
+        "{text}"
+    );
+    assert_eq!(p["machine"]["os"], std::env::consts::OS);
+    assert_eq!(p["threads"], 1);
+    assert!(p["wall_s"].as_f64().is_some_and(|w| w > 0.0), "{text}");
+    assert_eq!(p["outcome"], "finished");
+    assert_eq!(p["sessions"].as_array().map(Vec::len), Some(1), "{text}");
+    assert_eq!(p["sessions"][0]["wall_s"], p["wall_s"]);
+    let log = std::fs::read_to_string(out_dir.join("log.txt")).unwrap();
+    let first = log.lines().next().unwrap_or_default();
+    assert!(
+        first.contains(&format!("] cpose {} (", env!("CARGO_PKG_VERSION")))
+            && first.contains(") on ")
+            && first.ends_with(", 1 thread"),
+        "{log}"
+    );
+
+    // `held_out_poses` is a JSON integer: printed as one, in a table on stdout.
+    let out = cpose_in(&dir, &["table", out_dir.to_str().unwrap()]);
+    assert!(
+        out.status.success() && out.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8(out.stdout).unwrap();
+    let cells = |line: usize| -> Vec<&str> {
+        let row = table.lines().nth(line).unwrap_or_default();
+        row.split('|').map(str::trim).collect()
+    };
+    let column = cells(0)
+        .iter()
+        .position(|h| *h == "held_out_poses")
+        .unwrap();
+    let row = cells(2);
+    assert_eq!(row[column], "950", "{table}");
+}
+
 /// Every committed config runs end to end at 0.5% of its iterations, one thread. Configs that
 /// read the shared real data get its path; they are skipped when it is missing.
 #[test]

@@ -421,7 +421,7 @@ impl<'a> Study<'a> {
 
     /// `metrics.json`: condition → method → metrics (seeds summarised, each kept under `runs`).
     fn metrics_json(&self, results: &Results) -> Value {
-        let mut grouped: BTreeMap<&str, BTreeMap<&str, Vec<(u64, &Metrics)>>> = BTreeMap::new();
+        let mut grouped: BTreeMap<&str, BTreeMap<&str, Vec<_>>> = BTreeMap::new();
         for (k, m) in results {
             grouped
                 .entry(&k.condition)
