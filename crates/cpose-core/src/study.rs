@@ -65,6 +65,7 @@ use thiserror::Error;
 
 use crate::checkpoint::{Reader, Writer};
 use crate::config::Config;
+use crate::plot::CURVES_HEADER;
 use crate::progress::Progress;
 use crate::provenance::process_cpu_secs;
 use crate::registry::TaskInput;
@@ -602,7 +603,7 @@ impl Shared<'_, '_> {
             .clone();
         let dir = self.input.run_dir;
         dir.write_json("metrics.json", &self.study.metrics_json(&results))?;
-        let mut csv = String::from(CURVES_HEADER);
+        let mut csv = format!("{CURVES_HEADER}\n");
         for key in self.study.units.iter() {
             let path = dir.file(
                 Path::new("units")
@@ -634,7 +635,6 @@ fn metrics_line(metrics: &Metrics, columns: &[String]) -> String {
     s
 }
 
-const CURVES_HEADER: &str = "condition,method,seed,step,wall_s,metric,value\n";
 
 /// `path` with `suffix` appended to its file name.
 fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
@@ -860,7 +860,7 @@ impl Unit<'_> {
     fn restore_curves(&mut self) -> anyhow::Result<()> {
         let path = self.run_dir.file(self.dir.join("curves.csv"));
         let upto = self.resumed.as_ref().map(|(s, _)| *s);
-        let mut kept = String::from(CURVES_HEADER);
+        let mut kept = format!("{CURVES_HEADER}\n");
         if let (Some(upto), Ok(text)) = (upto, std::fs::read_to_string(&path)) {
             for line in text.lines().skip(1) {
                 let step = line.split(',').nth(3).and_then(|s| s.parse::<u64>().ok());
@@ -995,7 +995,7 @@ mod tests {
         assert!(dir.join("traj_easy_a_s0.txt").is_file());
         let curves = std::fs::read_to_string(dir.join("curves.csv")).unwrap();
         let mut lines = curves.lines();
-        assert_eq!(lines.next(), Some(CURVES_HEADER.trim_end()));
+        assert_eq!(lines.next(), Some(CURVES_HEADER));
         // Steps 1, 5, 10, 15, 20 for each of 8 units.
         assert_eq!(lines.clone().count(), 40);
         assert!(lines.any(|l| l.starts_with("hard,b,1,20,")), "{curves}");
