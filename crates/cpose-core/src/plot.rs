@@ -3,9 +3,14 @@
 //!
 //! - [`trajectories`]: evo_traj's layout, a top view (x–y, equal aspect) beside x, y, z and
 //!   roll, pitch, yaw over time;
+//! - [`trajectory_comparison`]: one estimate against the truth and the initial poses, in the
+//!   layout of [`trajectories`];
 //! - [`errors_over_time`]: e.g. position error per method over time;
+//! - [`stacked_line_charts`]: panels with their own y axes above one another, e.g. rotation and
+//!   position errors over time;
 //! - [`curves_csv`] / [`curves`]: training curves from `curves.csv`, one panel per metric;
-//! - [`line_chart`]: the general chart the two above are drawn with.
+//! - [`line_chart`]: the general one-panel chart, which [`errors_over_time`] draws with;
+//! - [`image_panels`]: pictures side by side with pixel axes and outlines drawn over them.
 //!
 //! Figures are drawn with `plotters` into memory, encoded as PNG and written atomically
 //! ([`crate::fs::write_atomic`]). Text is DejaVu Sans (the `dejavu` crate; Bitstream Vera
@@ -46,6 +51,8 @@ const TICK_LABEL_PX: f64 = 16.0;
 const LEGEND_PX: f64 = 19.0;
 const PANEL_TITLE_PX: f64 = 19.0;
 const TITLE_HEIGHT: u32 = 56;
+/// Height of the title strip above a picture of [`image_panels`].
+const IMAGE_TITLE_HEIGHT: u32 = 32;
 /// Height of one row of the legend.
 const LEGEND_ROW_HEIGHT: u32 = 30;
 /// Length of the line sample in front of a legend label.
@@ -358,6 +365,231 @@ pub fn line_chart(
             .map(|l| Trace::new(&l.x, &l.y, l.style))
             .collect();
         draw_panel(&body, None, x_label, y_label, y_scale, &traces)
+    })
+}
+
+/// Draws one trajectory estimate against the ground truth and the initial poses with
+/// [`trajectories`] (so in evo_traj's layout, into a [`TRAJECTORIES_SIZE`] PNG at `path`): every
+/// series is sampled at `times_secs`, in seconds from any origin (the time axes start at the
+/// first time, as evo's do); the truth is black and labelled "ground truth", `initial` grey and
+/// dashed, the estimate in the first estimate colour, each of these two under its own label.
+/// `None` or an empty slice leaves a series out; a series given must have one pose per time.
+///
+/// The one call of the tasks that compare a single estimate with the truth:
+///
+/// ```no_run
+/// # use nalgebra::Isometry3;
+/// # use cpose_core::plot::trajectory_comparison;
+/// # fn f(times: &[f64], truth: &[Isometry3<f64>], aligned: &[Isometry3<f64>]) -> Result<(), cpose_core::plot::PlotError> {
+/// trajectory_comparison(
+///     "trajectory_posenet.png",
+///     "slam room0: PoseNet camera path (SE(3)-aligned to the truth)",
+///     times,
+///     Some(truth),
+///     None,
+///     ("PoseNet (aligned)", aligned),
+/// )
+/// # }
+/// ```
+pub fn trajectory_comparison(
+    path: impl AsRef<Path>,
+    title: &str,
+    times_secs: &[f64],
+    truth: Option<&[Isometry3<f64>]>,
+    initial: Option<(&str, &[Isometry3<f64>])>,
+    estimate: (&str, &[Isometry3<f64>]),
+) -> Result<(), PlotError> {
+    let origin = times_secs
+        .iter()
+        .copied()
+        .find(|t| t.is_finite())
+        .unwrap_or(0.0);
+    let times: Vec<f64> = times_secs.iter().map(|t| t - origin).collect();
+    let mut series = Vec::new();
+    let mut add = |label: &str, poses: &[Isometry3<f64>], style| {
+        series.push(TrajectorySeries {
+            label: label.to_owned(),
+            times_secs: times.clone(),
+            poses: poses.to_vec(),
+            style,
+        });
+    };
+    if let Some(truth) = truth.filter(|p| !p.is_empty()) {
+        add("ground truth", truth, SeriesStyle::Truth);
+    }
+    if let Some((label, initial)) = initial.filter(|(_, p)| !p.is_empty()) {
+        add(label, initial, SeriesStyle::Initial);
+    }
+    add(estimate.0, estimate.1, SeriesStyle::Estimate(0));
+    trajectories(path, title, &series)
+}
+
+/// One panel of a [`stacked_line_charts`] figure: its y axis and its lines.
+#[derive(Clone, Debug)]
+pub struct Panel {
+    /// The y axis label, with the unit, e.g. `"rotation error (°)"`.
+    pub y_label: String,
+    /// The y axis scale.
+    pub y_scale: YScale,
+    /// The lines; a label and style shared with another panel's line is one legend entry.
+    pub lines: Vec<Line>,
+}
+
+/// Size of one panel of a [`stacked_line_charts`] figure in pixels (width, height); the figure
+/// is a column of these plus title and legend.
+pub const STACKED_PANEL_SIZE: (u32, u32) = (1200, 420);
+
+/// Draws `panels` one above the other into a PNG at `path`, each with its own y axis and all
+/// with the x axis `x_label`, under `title` and one legend naming every line (in order of first
+/// appearance; lines of the same label and style in several panels share an entry).
+pub fn stacked_line_charts(
+    path: impl AsRef<Path>,
+    title: &str,
+    x_label: &str,
+    panels: &[Panel],
+) -> Result<(), PlotError> {
+    let path = path.as_ref();
+    if panels.is_empty() {
+        return Err(empty(path, "no panels"));
+    }
+    let mut legend: Vec<(&str, SeriesStyle)> = Vec::new();
+    for panel in panels {
+        if panel.lines.is_empty() {
+            let what = format!("panel {:?} has no lines", panel.y_label);
+            return Err(empty(path, what));
+        }
+        for line in &panel.lines {
+            let counts = [("x values", line.x.len()), ("y values", line.y.len())];
+            check_lengths(path, &line.label, counts)?;
+            let entry = (line.label.as_str(), line.style);
+            if !legend.contains(&entry) {
+                legend.push(entry);
+            }
+        }
+    }
+    let width = STACKED_PANEL_SIZE.0;
+    let legend_rows = legend_layout(path, &legend, width)?;
+    let height = panels.len() as u32 * STACKED_PANEL_SIZE.1 + frame_height(legend_rows.len());
+    render_png(path, (width, height), |root| {
+        let body = draw_frame(root, title, &legend, &legend_rows)?;
+        let cells = body.split_evenly((panels.len(), 1));
+        for (panel, cell) in panels.iter().zip(&cells) {
+            let mut order: Vec<&Line> = panel.lines.iter().collect();
+            order.sort_by_key(|l| l.style.layer());
+            let traces: Vec<Trace> = order
+                .iter()
+                .map(|l| Trace::new(&l.x, &l.y, l.style))
+                .collect();
+            draw_panel(cell, None, x_label, &panel.y_label, panel.y_scale, &traces)?;
+        }
+        Ok(())
+    })
+}
+
+/// About the long side, in pixels, of a picture in an [`image_panels`] figure: larger pictures
+/// are shrunk to it, smaller ones enlarged by the whole factor nearest to reaching it.
+pub const IMAGE_PANEL_LONG_SIDE: u32 = 640;
+
+/// One picture of an [`image_panels`] figure and the outlines drawn over it.
+#[derive(Clone, Copy, Debug)]
+pub struct ImagePanel<'a> {
+    /// The text above the picture, e.g. `"neural image"`.
+    pub title: &'a str,
+    /// Width and height in pixels.
+    pub size: (usize, usize),
+    /// RGB values in `[0, 1]` (clamped; NaN is black), three per pixel, rows from the top.
+    pub rgb: &'a [f32],
+    /// Width and height the picture spans on its axes, "x (px)" and "y (px)": `size` for this
+    /// picture's pixels, or the original size when the picture is a downscaled copy.
+    pub extent: (f64, f64),
+    /// Drawn over the picture.
+    pub outlines: &'a [Outline],
+}
+
+/// Closed polygons drawn over an [`ImagePanel`]: one legend entry. Over pictures, lines have a
+/// white border, and [`SeriesStyle::Truth`] is drawn wider than the others so an estimate on top
+/// of it leaves it visible.
+#[derive(Clone, Debug)]
+pub struct Outline {
+    /// Legend text, e.g. `"true patch outlines"`.
+    pub label: String,
+    /// Colour and dashing.
+    pub style: SeriesStyle,
+    /// Corners of each polygon in the picture's axis units (x right, y down from the top-left
+    /// corner of the picture); the last corner joins the first.
+    pub polygons: Vec<Vec<(f64, f64)>>,
+}
+
+/// Draws pictures side by side into a PNG at `path`, each under its own title, with pixel axes
+/// and the outlines over it, under `title` and one legend naming every outline (in order of
+/// first appearance; outlines of the same label and style on several pictures share an entry).
+/// Each picture is shown about [`IMAGE_PANEL_LONG_SIDE`] pixels long (small ones enlarged by
+/// a whole factor, without smoothing).
+pub fn image_panels(
+    path: impl AsRef<Path>,
+    title: &str,
+    panels: &[ImagePanel],
+) -> Result<(), PlotError> {
+    let path = path.as_ref();
+    if panels.is_empty() {
+        return Err(empty(path, "no pictures"));
+    }
+    let mut legend: Vec<(&str, SeriesStyle)> = Vec::new();
+    for panel in panels {
+        let (w, h) = panel.size;
+        if w == 0 || h == 0 {
+            return Err(empty(
+                path,
+                format!("picture {:?} has no pixels", panel.title),
+            ));
+        }
+        if panel.rgb.len() != 3 * w * h {
+            return Err(PlotError::LengthMismatch {
+                path: path.to_path_buf(),
+                label: panel.title.to_owned(),
+                x_name: "values for its size (3 per pixel)",
+                xs: 3 * w * h,
+                y_name: "RGB values",
+                ys: panel.rgb.len(),
+            });
+        }
+        for outline in panel.outlines {
+            let entry = (outline.label.as_str(), outline.style);
+            if !legend.contains(&entry) {
+                legend.push(entry);
+            }
+        }
+    }
+    let shown: Vec<(u32, u32)> = panels.iter().map(|p| shown_size(p.size)).collect();
+    let cells: Vec<(u32, u32)> = shown
+        .iter()
+        .map(|&(w, h)| {
+            (
+                w + 2 * PANEL_MARGIN + Y_LABEL_AREA,
+                IMAGE_TITLE_HEIGHT + h + 2 * PANEL_MARGIN + X_LABEL_AREA,
+            )
+        })
+        .collect();
+    let cells_width: u32 = cells.iter().map(|c| c.0).sum();
+    register_fonts().map_err(|message| PlotError::Draw {
+        path: path.to_path_buf(),
+        message,
+    })?;
+    let title_width = FontDesc::new(FontFamily::Name(FONT), TITLE_PX, FontStyle::Bold)
+        .box_size(title)
+        .map_or(0, |(w, _)| w);
+    let width = cells_width.max(title_width + 2 * LEGEND_GAP as u32);
+    let legend_rows = legend_layout(path, &legend, width)?;
+    let cells_height = cells.iter().map(|c| c.1).max().unwrap_or(0);
+    let height = frame_height(legend_rows.len()) + cells_height;
+    render_png(path, (width, height), |root| {
+        let body = draw_frame(root, title, &legend, &legend_rows)?;
+        let mut x = ((width - cells_width) / 2) as i32;
+        for ((panel, &size), &cell) in panels.iter().zip(&shown).zip(&cells) {
+            draw_image_panel(&body.clone().shrink((x, 0), cell), panel, size)?;
+            x += cell.0 as i32;
+        }
+        Ok(())
     })
 }
 
@@ -1022,6 +1254,151 @@ where
     Ok(())
 }
 
+/// Pixel size a picture of `size` pixels is shown at (see [`IMAGE_PANEL_LONG_SIDE`]).
+fn shown_size((width, height): (usize, usize)) -> (u32, u32) {
+    let long = width.max(height) as f64;
+    let target = f64::from(IMAGE_PANEL_LONG_SIDE);
+    let zoom = if long >= target {
+        target / long
+    } else {
+        (target / long).round().max(1.0)
+    };
+    let side = |pixels: usize| ((pixels as f64 * zoom).round() as u32).max(1);
+    (side(width), side(height))
+}
+
+/// `rgb` (`[0, 1]`, three per pixel, `size` pixels) resampled to `shown` pixels as 8-bit RGB:
+/// nearest pixel when enlarging, the mean of the covered pixels when shrinking.
+fn resample_rgb(rgb: &[f32], (width, height): (usize, usize), shown: (u32, u32)) -> Vec<u8> {
+    let (shown_w, shown_h) = (shown.0 as usize, shown.1 as usize);
+    // Source pixels [start, end) covered by shown pixel `i` of `n`, on a side of `pixels`.
+    let covered = |i: usize, n: usize, pixels: usize| {
+        let start = (i * pixels / n).min(pixels - 1);
+        let end = ((i + 1) * pixels).div_ceil(n).clamp(start + 1, pixels);
+        start..end
+    };
+    let byte = |v: f32| {
+        if v.is_nan() {
+            0
+        } else {
+            (v.clamp(0.0, 1.0) * 255.0).round() as u8
+        }
+    };
+    let mut out = Vec::with_capacity(3 * shown_w * shown_h);
+    for y in 0..shown_h {
+        let rows = covered(y, shown_h, height);
+        for x in 0..shown_w {
+            let columns = covered(x, shown_w, width);
+            let mut sum = [0.0f32; 3];
+            for row in rows.clone() {
+                for column in columns.clone() {
+                    let i = 3 * (row * width + column);
+                    for c in 0..3 {
+                        sum[c] += rgb[i + c];
+                    }
+                }
+            }
+            let n = (rows.len() * columns.len()) as f32;
+            out.extend(sum.map(|s| byte(s / n)));
+        }
+    }
+    out
+}
+
+/// Line width of an outline over a picture: the truth wider, so an estimate on it leaves it
+/// visible.
+fn outline_width(style: SeriesStyle) -> u32 {
+    match style {
+        SeriesStyle::Truth => 2 * LINE_WIDTH + 1,
+        _ => LINE_WIDTH,
+    }
+}
+
+/// One picture of [`image_panels`] in `cell`: the title, the picture `shown` pixels large with
+/// pixel axes around it, and the outlines over it.
+fn draw_image_panel(cell: &Area, panel: &ImagePanel, shown: (u32, u32)) -> DrawResult {
+    let title_style = font(PANEL_TITLE_PX)
+        .color(&BLACK)
+        .pos(text_anchor::Pos::new(
+            text_anchor::HPos::Center,
+            text_anchor::VPos::Center,
+        ));
+    let centre = (PANEL_MARGIN + Y_LABEL_AREA + shown.0 / 2) as i32;
+    cell.draw_text(
+        panel.title,
+        &title_style,
+        (centre, IMAGE_TITLE_HEIGHT as i32 / 2),
+    )?;
+    let (_, chart_area) = cell.split_vertically(IMAGE_TITLE_HEIGHT);
+    // Axis units per shown pixel; a point (u, v) of the picture is drawn at (u, −v), so y grows
+    // downwards as in the picture. Plotters maps a range onto the first to the last pixel, hence
+    // the ranges end one shown pixel short of the extent.
+    let (width, height) = panel.extent;
+    let (unit_x, unit_y) = (width / f64::from(shown.0), height / f64::from(shown.1));
+    let mut chart = ChartBuilder::on(&chart_area)
+        .margin(PANEL_MARGIN)
+        .x_label_area_size(X_LABEL_AREA)
+        .y_label_area_size(Y_LABEL_AREA)
+        .build_cartesian_2d(0.0..width - unit_x, -(height - unit_y)..0.0)?;
+    debug_assert_eq!(chart.plotting_area().dim_in_pixel(), shown);
+    let flip = |v: &f64| tick_label(&-*v);
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("x (px)")
+        .y_desc("y (px)")
+        .x_labels(7)
+        .y_labels(6)
+        .label_style(font(TICK_LABEL_PX).color(&BLACK))
+        .axis_desc_style(font(AXIS_LABEL_PX).color(&BLACK))
+        .x_label_formatter(&tick_label)
+        .y_label_formatter(&flip)
+        .axis_style(BLACK.mix(0.6))
+        .draw()?;
+    let pixels = resample_rgb(panel.rgb, panel.size, shown);
+    let picture = BitMapElement::with_owned_buffer((0, 0), shown, pixels)
+        .ok_or("the resampled picture does not fill its size")?;
+    chart.plotting_area().strip_coord_spec().draw(&picture)?;
+
+    let mut order: Vec<&Outline> = panel.outlines.iter().collect();
+    order.sort_by_key(|o| o.style.layer());
+    let closed = |polygon: &[(f64, f64)]| -> Vec<(f64, f64)> {
+        let mut points: Vec<(f64, f64)> = polygon.iter().map(|&(u, v)| (u, -v)).collect();
+        if let Some(&first) = points.first() {
+            points.push(first);
+        }
+        points
+    };
+    // White borders under every line first, then the lines, truth at the bottom.
+    for (border, outline) in [true, false]
+        .into_iter()
+        .flat_map(|b| order.iter().map(move |o| (b, o)))
+    {
+        let width = outline_width(outline.style);
+        let style = if border {
+            WHITE.stroke_width(width + 2)
+        } else {
+            outline.style.colour().stroke_width(width)
+        };
+        for polygon in &outline.polygons {
+            let points = closed(polygon);
+            if outline.style.dashed() && !border {
+                chart.draw_series(DashedLineSeries::new(points, DASH, DASH, style))?;
+            } else {
+                // Round joins: a disc at every corner.
+                let radius = (style.stroke_width / 2).max(1);
+                chart.draw_series(
+                    points
+                        .iter()
+                        .map(|&p| Circle::new(p, radius, style.filled())),
+                )?;
+                chart.draw_series(std::iter::once(PathElement::new(points, style)))?;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A tick label with no trailing zeros (`0.5`, `10`, `1e-5`) and a true minus sign.
 fn tick_label(value: &f64) -> String {
     let v = *value;
@@ -1407,6 +1784,174 @@ mod tests {
             legend,
             (vec!["a (2 seeds)".into(), "b".into()], vec![0, 1, 0])
         );
+    }
+
+    #[test]
+    fn trajectory_comparison_draws_truth_initial_and_estimate_from_any_time_origin() {
+        let dir = TempDir::new("plot-comparison");
+        let path = sample_path(&dir, "comparison.png");
+        let times: Vec<f64> = (0..=200).map(|i| 1.3e9 + i as f64 * 0.1).collect();
+        let relative: Vec<f64> = times.iter().map(|t| t - times[0]).collect();
+        let (truth, initial, estimate) = (
+            circle(&relative, 0.0),
+            circle(&relative, 0.3),
+            circle(&relative, 0.05),
+        );
+        trajectory_comparison(
+            &path,
+            "Circle: PoseNet (aligned) vs ground truth",
+            &times,
+            Some(&truth),
+            Some(("initial poses (aligned)", &initial)),
+            ("PoseNet (aligned)", &estimate),
+        )
+        .unwrap();
+        let (size, colours) = png_size_and_colours(&path);
+        assert_eq!(size, TRAJECTORIES_SIZE);
+        assert!(colours > 20, "{colours} colours");
+        // Without truth and with an empty initial: the estimate alone.
+        let alone = dir.join("alone.png");
+        trajectory_comparison(
+            &alone,
+            "t",
+            &times,
+            None,
+            Some(("i", &[])),
+            ("e", &estimate),
+        )
+        .unwrap();
+        assert_eq!(png_size_and_colours(&alone).0, TRAJECTORIES_SIZE);
+        let error = trajectory_comparison(
+            &alone,
+            "t",
+            &times,
+            Some(&truth[1..]),
+            None,
+            ("e", &estimate),
+        )
+        .unwrap_err();
+        assert!(matches!(error, PlotError::LengthMismatch { .. }), "{error}");
+    }
+
+    #[test]
+    fn stacked_line_charts_draw_one_panel_per_axis_and_one_legend() {
+        let dir = TempDir::new("plot-stacked");
+        let path = sample_path(&dir, "stacked.png");
+        let t: Vec<f64> = (0..=300).map(|i| i as f64 * 0.1).collect();
+        let line = |label: &str, scale: f64, style| Line {
+            label: label.into(),
+            x: t.clone(),
+            y: t.iter().map(|t| scale * (1.2 + (0.7 * t).sin())).collect(),
+            style,
+        };
+        let panels = [
+            Panel {
+                y_label: "rotation error (°)".into(),
+                y_scale: YScale::LinearFromZero,
+                lines: vec![
+                    line("interpolation", 0.5, SeriesStyle::Initial),
+                    line("PoseNet", 0.1, SeriesStyle::Estimate(0)),
+                ],
+            },
+            Panel {
+                y_label: "position error (cm)".into(),
+                y_scale: YScale::LinearFromZero,
+                lines: vec![
+                    line("interpolation", 3.0, SeriesStyle::Initial),
+                    line("PoseNet", 1.0, SeriesStyle::Estimate(0)),
+                ],
+            },
+        ];
+        stacked_line_charts(&path, "Held-out errors", "time (s)", &panels).unwrap();
+        let (size, colours) = png_size_and_colours(&path);
+        assert_eq!(size.0, STACKED_PANEL_SIZE.0);
+        // One legend row for the two shared entries.
+        assert_eq!(size.1, 2 * STACKED_PANEL_SIZE.1 + frame_height(1));
+        assert!(colours > 20, "{colours} colours");
+        let no_lines = Panel {
+            y_label: "e".into(),
+            y_scale: YScale::Linear,
+            lines: vec![],
+        };
+        let error = stacked_line_charts(&path, "t", "x", &[no_lines]).unwrap_err();
+        assert!(error.to_string().contains("has no lines"), "{error}");
+    }
+
+    #[test]
+    fn image_panels_show_pictures_with_outlines_and_a_legend() {
+        let dir = TempDir::new("plot-image");
+        let path = sample_path(&dir, "image_panels.png");
+        let (w, h) = (120, 90);
+        let picture: Vec<f32> = (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
+                [x, y, 0.5 * (x + y)]
+            })
+            .collect();
+        let square = |x: f64, y: f64, side: f64| {
+            vec![(x, y), (x + side, y), (x + side, y + side), (x, y + side)]
+        };
+        // Axes in pixels of a twice as large original.
+        let outlines = [
+            Outline {
+                label: "true patch outlines".into(),
+                style: SeriesStyle::Truth,
+                polygons: vec![square(40.0, 30.0, 80.0), square(60.0, 40.0, 80.0)],
+            },
+            Outline {
+                label: "estimated outlines (PoseNet)".into(),
+                style: SeriesStyle::Estimate(0),
+                polygons: vec![square(41.0, 31.0, 80.0), square(66.0, 44.0, 80.0)],
+            },
+        ];
+        let panels = [
+            ImagePanel {
+                title: "image",
+                size: (w, h),
+                rgb: &picture,
+                extent: (2.0 * w as f64, 2.0 * h as f64),
+                outlines: &outlines,
+            },
+            ImagePanel {
+                title: "neural image",
+                size: (w, h),
+                rgb: &picture,
+                extent: (2.0 * w as f64, 2.0 * h as f64),
+                outlines: &[],
+            },
+        ];
+        image_panels(&path, "Patch alignment: PoseNet", &panels).unwrap();
+        let (size, colours) = png_size_and_colours(&path);
+        // 120 px wide pictures are shown 5 times enlarged.
+        let shown = (5 * w as u32, 5 * h as u32);
+        assert_eq!(shown_size((w, h)), shown);
+        assert_eq!(size.0, 2 * (shown.0 + 2 * PANEL_MARGIN + Y_LABEL_AREA));
+        assert!(colours > 100, "{colours} colours");
+        let error = image_panels(
+            &path,
+            "t",
+            &[ImagePanel {
+                rgb: &picture[3..],
+                ..panels[1]
+            }],
+        )
+        .unwrap_err();
+        assert!(matches!(error, PlotError::LengthMismatch { .. }), "{error}");
+    }
+
+    #[test]
+    fn pictures_are_enlarged_by_whole_factors_and_shrunk_by_averaging() {
+        assert_eq!(shown_size((32, 32)), (640, 640));
+        assert_eq!(shown_size((240, 180)), (720, 540));
+        assert_eq!(shown_size((1280, 640)), (640, 320));
+        let rgb = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
+        // Enlarged: each pixel repeated.
+        assert_eq!(
+            resample_rgb(&rgb, (2, 1), (4, 1)),
+            [0, 0, 0, 0, 0, 0, 255, 255, 255, 255, 255, 255]
+        );
+        // Shrunk: the mean.
+        assert_eq!(resample_rgb(&rgb, (2, 1), (1, 1)), [128, 128, 128]);
     }
 
     #[test]

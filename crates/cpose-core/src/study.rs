@@ -10,7 +10,8 @@
 //!   is never run again;
 //! - **timing**: wall and CPU seconds per unit (summed over resumed sessions);
 //! - **files**: names from [`Unit::file_name`] (`traj_<condition>_<method>.txt`), `metrics.json`
-//!   nested condition → method, and the final table in the log.
+//!   nested condition → method, the training curves drawn as `curves.png` and the final table
+//!   in the log.
 //!
 //! The run folder, besides the task's own files:
 //!
@@ -19,6 +20,7 @@
 //! | `study.json` | the task, a hash of the resolved config, the units, whether the study finished |
 //! | `metrics.json` | condition → method → metrics, rewritten after every finished unit |
 //! | `curves.csv` | `condition,method,seed,step,wall_s,metric,value`, one row per reported value |
+//! | `curves.png` | `curves.csv` drawn, one panel per metric ([`crate::plot::curves`]) |
 //! | `units/<unit>/result.json` | a finished unit's metrics (its presence means "finished") |
 //! | `units/<unit>/checkpoint.bin` | an unfinished unit's last state, removed when it finishes |
 //! | `units/<unit>/curves.csv` | that unit's rows of `curves.csv` |
@@ -55,6 +57,7 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
@@ -65,7 +68,7 @@ use thiserror::Error;
 
 use crate::checkpoint::{Reader, Writer};
 use crate::config::Config;
-use crate::plot::CURVES_HEADER;
+use crate::plot::{self, CURVES_HEADER};
 use crate::progress::Progress;
 use crate::provenance::process_cpu_secs;
 use crate::registry::TaskInput;
@@ -73,6 +76,10 @@ use crate::run_dir::RunDir;
 
 /// Steps between two live reports unless the task or `[run] report_every` says otherwise.
 pub const DEFAULT_REPORT_EVERY: usize = 100;
+
+/// While a study runs, `curves.png` is redrawn after a finished unit when this many seconds
+/// have passed since it was last drawn (and always at the end).
+const CURVES_PNG_EVERY_SECS: f64 = 30.0;
 
 /// One unit of a study: a condition (noise level, sequence, IMU mode…), a method (a pose model
 /// such as `posenet` or `barf`) and a seed.
@@ -357,6 +364,11 @@ impl<'a> Study<'a> {
         let seeds: BTreeSet<u64> = self.units.iter().map(|u| u.seed).collect();
         let with_seed = seeds.len() > 1;
         let task = input.config.task_name()?;
+        let config_name = input.config.path().file_name().map_or_else(
+            || input.config.path().display().to_string(),
+            |name| name.to_string_lossy().into_owned(),
+        );
+        let curves_title = format!("Training curves: task {task}, {config_name}");
         let hash = config_hash(input.config);
         if input.resume {
             check_resume(dir.path(), &task, input.config)?;
@@ -397,6 +409,9 @@ impl<'a> Study<'a> {
             write: Mutex::new(()),
             study: &self,
             with_seed,
+            curves_title,
+            curves_plot_failed: AtomicBool::new(false),
+            curves_drawn: Mutex::new(None),
         };
         let run_one = |(key, name): &(UnitKey, String)| -> anyhow::Result<()> {
             let metrics = shared
@@ -405,14 +420,14 @@ impl<'a> Study<'a> {
             if let Ok(mut r) = shared.results.lock() {
                 r.insert(key.clone(), metrics);
             }
-            shared.write_outputs()
+            shared.write_outputs(false)
         };
         if self.parallel {
             pending.par_iter().try_for_each(run_one)?;
         } else {
             pending.iter().try_for_each(run_one)?;
         }
-        shared.write_outputs()?;
+        shared.write_outputs(true)?;
         let results = shared.results.into_inner().unwrap_or_default();
         dir.log(self.table(&results));
         manifest.finished = true;
@@ -532,6 +547,12 @@ struct Shared<'s, 'a> {
     write: Mutex<()>,
     study: &'s Study<'a>,
     with_seed: bool,
+    /// The title of `curves.png`.
+    curves_title: String,
+    /// Whether drawing `curves.png` failed (and was logged) already.
+    curves_plot_failed: AtomicBool,
+    /// When `curves.png` was last drawn.
+    curves_drawn: Mutex<Option<Instant>>,
 }
 
 impl Shared<'_, '_> {
@@ -593,8 +614,9 @@ impl Shared<'_, '_> {
         Ok(metrics)
     }
 
-    /// Rewrites `metrics.json` and `curves.csv` from the finished units.
-    fn write_outputs(&self) -> anyhow::Result<()> {
+    /// Rewrites `metrics.json`, `curves.csv` and `curves.png` from the finished units; until
+    /// the study has `finished`, `curves.png` at most every [`CURVES_PNG_EVERY_SECS`].
+    fn write_outputs(&self, finished: bool) -> anyhow::Result<()> {
         let _guard = self.write.lock();
         let results = self
             .results
@@ -615,7 +637,28 @@ impl Shared<'_, '_> {
             }
         }
         dir.write("curves.csv", csv.as_bytes())?;
+        if let Ok(mut drawn) = self.curves_drawn.lock()
+            && (finished
+                || drawn.is_none_or(|t| t.elapsed().as_secs_f64() >= CURVES_PNG_EVERY_SECS))
+        {
+            self.write_curves_png(&csv);
+            *drawn = Some(Instant::now());
+        }
         Ok(())
+    }
+
+    /// Draws `curves.csv` (`csv`, when it has rows) as `curves.png`. A plot is not worth a
+    /// study: a failure is logged (once) and the study goes on.
+    fn write_curves_png(&self, csv: &str) {
+        if csv.lines().nth(1).is_none() {
+            return;
+        }
+        let dir = self.input.run_dir;
+        if let Err(e) = plot::curves_csv(dir.file("curves.png"), &self.curves_title, csv)
+            && !self.curves_plot_failed.swap(true, Ordering::Relaxed)
+        {
+            dir.log(format_args!("curves.png not drawn: {e}"));
+        }
     }
 }
 
@@ -634,7 +677,6 @@ fn metrics_line(metrics: &Metrics, columns: &[String]) -> String {
     }
     s
 }
-
 
 /// `path` with `suffix` appended to its file name.
 fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
@@ -999,6 +1041,12 @@ mod tests {
         // Steps 1, 5, 10, 15, 20 for each of 8 units.
         assert_eq!(lines.clone().count(), 40);
         assert!(lines.any(|l| l.starts_with("hard,b,1,20,")), "{curves}");
+        let plot = image::open(dir.join("curves.png")).unwrap();
+        assert!(
+            plot.width() >= plot::CURVES_PANEL_SIZE.0,
+            "{}",
+            plot.width()
+        );
         // No checkpoint is left behind by finished units.
         assert!(!dir.join("units/hard_b_s1/checkpoint.bin").exists());
         let log = std::fs::read_to_string(dir.join("log.txt")).unwrap();
@@ -1011,6 +1059,18 @@ mod tests {
                 .is_some_and(|e| matches!(e, ResumeError::Finished(_))),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_plot_that_cannot_be_written_is_logged_and_the_study_finishes() {
+        let dir = TempDir::new("study-no-plot");
+        // A folder in the way of curves.png.
+        std::fs::create_dir_all(dir.join("curves.png")).unwrap();
+        let calls = AtomicUsize::new(0);
+        let results = demo(&dir, false, None, &calls).unwrap();
+        assert_eq!(results.len(), 8);
+        let log = std::fs::read_to_string(dir.join("log.txt")).unwrap();
+        assert_eq!(log.matches("curves.png not drawn").count(), 1, "{log}");
     }
 
     #[test]
