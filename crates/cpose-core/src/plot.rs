@@ -16,8 +16,9 @@
 //! ([`crate::fs::write_atomic`]). Text is DejaVu Sans (the `dejavu` crate; Bitstream Vera
 //! licence) rasterised by `ab_glyph`, so no system font is needed.
 //!
-//! Colours follow [`SeriesStyle`]: ground truth black, initial poses grey and dashed, estimates
-//! in matplotlib's `tab10` order, so `Estimate(i)` has the same colour in every figure.
+//! Colours follow [`SeriesStyle`]: ground truth black, initial poses grey and dashed, references
+//! light grey, estimates in matplotlib's `tab10` order, so `Estimate(i)` has the same colour in
+//! every figure.
 
 use std::collections::HashMap;
 use std::f64::consts::TAU;
@@ -89,6 +90,7 @@ const ESTIMATE_COLOURS: [RGBColor; 9] = [
 ];
 const TRUTH_COLOUR: RGBColor = RGBColor(0, 0, 0);
 const INITIAL_COLOUR: RGBColor = RGBColor(140, 140, 140);
+const REFERENCE_COLOUR: RGBColor = RGBColor(165, 165, 165);
 
 /// Errors of this module; each names the PNG it was drawing.
 #[derive(Debug, thiserror::Error)]
@@ -150,6 +152,9 @@ pub enum SeriesStyle {
     Truth,
     /// Initial poses (before optimisation): grey, dashed.
     Initial,
+    /// A reference the estimates are compared with, such as interpolation of the known poses:
+    /// light grey, solid (a dashed line is unreadable when it wiggles fast).
+    Reference,
     /// The `i`-th estimate: the `i`-th colour of matplotlib's `tab10` (grey skipped), solid.
     Estimate(usize),
 }
@@ -159,6 +164,7 @@ impl SeriesStyle {
         match self {
             Self::Truth => TRUTH_COLOUR,
             Self::Initial => INITIAL_COLOUR,
+            Self::Reference => REFERENCE_COLOUR,
             Self::Estimate(i) => ESTIMATE_COLOURS[i % ESTIMATE_COLOURS.len()],
         }
     }
@@ -171,7 +177,7 @@ impl SeriesStyle {
     fn layer(self) -> usize {
         match self {
             Self::Truth => 0,
-            Self::Initial => 1,
+            Self::Initial | Self::Reference => 1,
             Self::Estimate(_) => 2,
         }
     }
@@ -575,9 +581,7 @@ pub fn image_panels(
         path: path.to_path_buf(),
         message,
     })?;
-    let title_width = FontDesc::new(FontFamily::Name(FONT), TITLE_PX, FontStyle::Bold)
-        .box_size(title)
-        .map_or(0, |(w, _)| w);
+    let title_width = title_font(TITLE_PX).box_size(title).map_or(0, |(w, _)| w);
     let width = cells_width.max(title_width + 2 * LEGEND_GAP as u32);
     let legend_rows = legend_layout(path, &legend, width)?;
     let cells_height = cells.iter().map(|c| c.1).max().unwrap_or(0);
@@ -995,6 +999,10 @@ fn font(size: f64) -> FontDesc<'static> {
     FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Normal)
 }
 
+fn title_font(size: f64) -> FontDesc<'static> {
+    FontDesc::new(FontFamily::Name(FONT), size, FontStyle::Bold)
+}
+
 /// Height taken by the title and a legend of `legend_rows` rows.
 fn frame_height(legend_rows: usize) -> u32 {
     TITLE_HEIGHT + legend_rows as u32 * LEGEND_ROW_HEIGHT + PANEL_MARGIN
@@ -1043,7 +1051,15 @@ fn draw_frame<'a>(
     legend_rows: &[Vec<usize>],
 ) -> DrawResult<Area<'a>> {
     let (width, _) = root.dim_in_pixel();
-    let title_style = FontDesc::new(FontFamily::Name(FONT), TITLE_PX, FontStyle::Bold)
+    // A title too long for the figure is set smaller, down to the legend's size.
+    let room = f64::from(width) - 2.0 * f64::from(PANEL_MARGIN);
+    let title_width = f64::from(title_font(TITLE_PX).box_size(title)?.0);
+    let title_px = if title_width > room {
+        (TITLE_PX * room / title_width).max(LEGEND_PX)
+    } else {
+        TITLE_PX
+    };
+    let title_style = title_font(title_px)
         .color(&BLACK)
         .pos(text_anchor::Pos::new(
             text_anchor::HPos::Center,
@@ -1227,6 +1243,11 @@ where
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(x_range, y_range)?;
     debug_assert_eq!(chart.plotting_area().dim_in_pixel(), plotting_size(area));
+    let span = |r: Range<f64>| (r.end - r.start).abs();
+    let (x_span, y_span) = (span(chart.x_range()), span(chart.y_range()));
+    let x_tick = |v: &f64| tick_label(&snap_to_zero(*v, x_span));
+    // Ticks of a log axis are never near zero on its scale.
+    let y_tick = |v: &f64| tick_label(&if log_y { *v } else { snap_to_zero(*v, y_span) });
     chart
         .configure_mesh()
         .x_desc(x_label)
@@ -1235,8 +1256,8 @@ where
         .y_labels(6)
         .label_style(font(TICK_LABEL_PX).color(&BLACK))
         .axis_desc_style(font(AXIS_LABEL_PX).color(&BLACK))
-        .x_label_formatter(&tick_label)
-        .y_label_formatter(&tick_label)
+        .x_label_formatter(&x_tick)
+        .y_label_formatter(&y_tick)
         .bold_line_style(BLACK.mix(0.12))
         .max_light_lines(0)
         .axis_style(BLACK.mix(0.6))
@@ -1341,7 +1362,8 @@ fn draw_image_panel(cell: &Area, panel: &ImagePanel, shown: (u32, u32)) -> DrawR
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(0.0..width - unit_x, -(height - unit_y)..0.0)?;
     debug_assert_eq!(chart.plotting_area().dim_in_pixel(), shown);
-    let flip = |v: &f64| tick_label(&-*v);
+    let x_tick = |v: &f64| tick_label(&snap_to_zero(*v, width));
+    let flip = |v: &f64| tick_label(&snap_to_zero(-*v, height));
     chart
         .configure_mesh()
         .disable_mesh()
@@ -1351,7 +1373,7 @@ fn draw_image_panel(cell: &Area, panel: &ImagePanel, shown: (u32, u32)) -> DrawR
         .y_labels(6)
         .label_style(font(TICK_LABEL_PX).color(&BLACK))
         .axis_desc_style(font(AXIS_LABEL_PX).color(&BLACK))
-        .x_label_formatter(&tick_label)
+        .x_label_formatter(&x_tick)
         .y_label_formatter(&flip)
         .axis_style(BLACK.mix(0.6))
         .draw()?;
@@ -1397,6 +1419,16 @@ fn draw_image_panel(cell: &Area, panel: &ImagePanel, shown: (u32, u32)) -> DrawR
         }
     }
     Ok(())
+}
+
+/// 0 for a tick value within rounding error of zero on an axis spanning `span` (a tick at
+/// `2.8e−17` of an axis centred on 0 is at 0).
+fn snap_to_zero(value: f64, span: f64) -> f64 {
+    if value.abs() <= 1e-9 * span {
+        0.0
+    } else {
+        value
+    }
 }
 
 /// A tick label with no trailing zeros (`0.5`, `10`, `1e-5`) and a true minus sign.
@@ -1952,6 +1984,13 @@ mod tests {
         );
         // Shrunk: the mean.
         assert_eq!(resample_rgb(&rgb, (2, 1), (1, 1)), [128, 128, 128]);
+    }
+
+    #[test]
+    fn ticks_within_rounding_error_of_zero_are_zero() {
+        assert_eq!(tick_label(&snap_to_zero(2.776e-17, 0.4)), "0");
+        assert_eq!(tick_label(&snap_to_zero(-0.1, 0.4)), "\u{2212}0.1");
+        assert_eq!(tick_label(&snap_to_zero(1e-12, 1e-10)), "1e\u{2212}12");
     }
 
     #[test]
