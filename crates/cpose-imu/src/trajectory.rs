@@ -10,6 +10,11 @@
 //! Fields work in a normalised frame (rotated to the mean known orientation, centred and scaled
 //! so that PoseNet's tanh-bounded translation fits; see `Normalisation`); errors are reported in
 //! degrees and metres of the original world.
+//!
+//! Besides `traj_<imu>_<method>.txt`, every unit draws `trajectory_<imu>_<method>.png` (the
+//! estimate against the truth and the known poses, evo_traj's layout) and
+//! `errors_<imu>_<method>.png` (its rotation and position errors at the held-out poses over
+//! time, beside those of the reference: slerp and linear interpolation of the known poses).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -18,6 +23,7 @@ use anyhow::{Context, bail};
 use cpose_core::config::Config;
 use cpose_core::eval::{self, Trajectory};
 use cpose_core::nn::{Adam, ExponentialDecay};
+use cpose_core::plot::{self, Line, Panel, SeriesStyle, TrajectorySeries, YScale};
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
@@ -422,6 +428,118 @@ fn pose_errors(
     Ok((rot.mean, rot.rmse, trans.mean, trans.rmse))
 }
 
+/// Rotation (degrees) and position (centimetres) errors at each held-out pose.
+struct HeldOutErrors {
+    rot_deg: Vec<f64>,
+    pos_cm: Vec<f64>,
+}
+
+impl HeldOutErrors {
+    fn new(estimated: &[Isometry3<f64>], truth: &[Isometry3<f64>]) -> anyhow::Result<Self> {
+        Ok(Self {
+            rot_deg: eval::ape_rotation_angle(truth, estimated)?
+                .into_iter()
+                .map(f64::to_degrees)
+                .collect(),
+            pos_cm: eval::ape_translation(truth, estimated)?
+                .into_iter()
+                .map(|e| 100.0 * e)
+                .collect(),
+        })
+    }
+}
+
+/// What a unit's plots share with the other units.
+struct UnitPlots<'a> {
+    seq: &'a Sequence,
+    known_poses: &'a [Isometry3<f64>],
+    held_times: &'a [f64],
+    /// The interpolation reference's errors, drawn beside a method's.
+    reference: Option<&'a HeldOutErrors>,
+}
+
+/// Legend text of the interpolation reference.
+const INTERP_LABEL: &str = "interpolation of known poses";
+
+impl UnitPlots<'_> {
+    /// Draws `trajectory_<imu>_<method>.png` and `errors_<imu>_<method>.png` of the unit whose
+    /// poses at every time are `all`; `(rot_err_deg, trans_err_m)` are its mean held-out
+    /// errors. A plot that fails is logged; the unit goes on.
+    fn draw(
+        &self,
+        unit: &Unit,
+        all: &[Isometry3<f64>],
+        errors: &HeldOutErrors,
+        (rot_err_deg, trans_err_m): (f64, f64),
+    ) {
+        let key = unit.key();
+        let label = if key.method == INTERP {
+            INTERP_LABEL.to_owned()
+        } else {
+            format!("{}, imu = {}", key.method, key.condition)
+        };
+        let mean = format!(
+            "held-out error {rot_err_deg:.2}° and {:.2} cm (mean)",
+            100.0 * trans_err_m
+        );
+        let series = [
+            TrajectorySeries {
+                label: "ground truth (all poses)".into(),
+                times_secs: self.seq.times.clone(),
+                poses: self.seq.poses.clone(),
+                style: SeriesStyle::Truth,
+            },
+            TrajectorySeries {
+                label: "known poses (supervision)".into(),
+                times_secs: self.seq.known_times.clone(),
+                poses: self.known_poses.to_vec(),
+                style: SeriesStyle::Initial,
+            },
+            TrajectorySeries {
+                label: label.clone(),
+                times_secs: self.seq.times.clone(),
+                poses: all.to_vec(),
+                style: SeriesStyle::Estimate(0),
+            },
+        ];
+        let title = format!("Trajectory fit: {label}; {mean}");
+        if let Err(e) = plot::trajectories(unit.file("trajectory", "png"), &title, &series) {
+            unit.log(format_args!("no trajectory plot: {e}"));
+        }
+
+        let line = |label: &str, y: &[f64], style| Line {
+            label: label.to_owned(),
+            x: self.held_times.to_vec(),
+            y: y.to_vec(),
+            style,
+        };
+        let panel = |y_label: &str, pick: fn(&HeldOutErrors) -> &[f64]| {
+            let mut lines = Vec::new();
+            if let Some(reference) = self.reference {
+                lines.push(line(INTERP_LABEL, pick(reference), SeriesStyle::Reference));
+            }
+            lines.push(line(&label, pick(errors), SeriesStyle::Estimate(0)));
+            Panel {
+                y_label: y_label.to_owned(),
+                y_scale: YScale::LinearFromZero,
+                lines,
+            }
+        };
+        let panels = [
+            panel("rotation error (°)", |e| &e.rot_deg),
+            panel("position error (cm)", |e| &e.pos_cm),
+        ];
+        let title = format!(
+            "Errors at {} held-out poses: {label}",
+            self.held_times.len()
+        );
+        let path = unit.file("errors", "png");
+        if let Err(e) = plot::stacked_line_charts(path, &title, "time (s)", &panels) {
+            unit.log(format_args!("no error plot: {e}"));
+        }
+    }
+}
+
 /// RMS of a set of errors; `None` when there are none.
 fn rms(errors: impl Iterator<Item = f64>) -> Option<f64> {
     eval::error_stats(&errors.collect::<Vec<_>>())
@@ -721,6 +839,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             units.push(UnitKey::new(mode.key(), name.as_str(), seed));
         }
     }
+    // The interpolation reference's errors at the held-out poses, drawn beside every method's.
+    let interp_errors = {
+        let estimated: Vec<Isometry3<f64>> =
+            held_times.iter().map(|&t| interpolate(&seq, t).0).collect();
+        HeldOutErrors::new(&estimated, &held_truth)?
+    };
     let ctx = FieldContext {
         time_range: seq.range(),
         frame_times_secs: known_times.clone(),
@@ -774,6 +898,14 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             let estimated: Vec<Isometry3<f64>> = held_out.iter().map(|&i| all[i]).collect();
             let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) =
                 pose_errors(&estimated, &held_truth)?;
+            let plots = UnitPlots {
+                seq: &seq,
+                known_poses: &known_poses,
+                held_times: &held_times,
+                reference: (name != INTERP).then_some(&interp_errors),
+            };
+            let errors = HeldOutErrors::new(&estimated, &held_truth)?;
+            plots.draw(unit, &all, &errors, (rot_err_deg, trans_err_m));
             write_trajectory(unit.file("traj", "txt"), &seq.times, all)?;
             Metrics::from_serialize(&MethodMetrics {
                 rot_err_deg,
