@@ -74,6 +74,9 @@ const PAD_FRACTION: f64 = 0.05;
 /// A y axis is logarithmic (in [`curves`]) when all values are positive and the largest is at
 /// least this many times the smallest.
 const LOG_SCALE_MIN_RATIO: f64 = 100.0;
+/// Decades a logarithmic axis spans at most (below the padding); smaller values, such as the
+/// rounding noise of an error that is zero, are drawn on its bottom edge.
+const LOG_SCALE_MAX_DECADES: f64 = 6.0;
 
 /// matplotlib's `tab10` without its grey (grey is for initial poses): the colours of
 /// [`SeriesStyle::Estimate`] in order, repeating after nine.
@@ -217,7 +220,8 @@ pub enum YScale {
     /// Linear from 0 (for errors and other non-negative quantities); as [`YScale::Linear`]
     /// when a value is negative.
     LinearFromZero,
-    /// Base-10 logarithmic; values `≤ 0` are left out.
+    /// Base-10 logarithmic, over at most six decades below the largest value: values `≤ 0` are
+    /// left out, positive values below the axis lie on its bottom edge.
     Log,
 }
 
@@ -610,7 +614,7 @@ pub fn curves_csv(path: impl AsRef<Path>, title: &str, csv_text: &str) -> Result
 ///
 /// A metric's y axis is logarithmic when all its values are positive and span at least a
 /// factor of 100 (a loss, typically); a unit suffix of the metric name labels the axis
-/// (`rot_err_deg` → "rot_err (°)"; `_cm`, `_mm`, `_m`, `_s`, `_db` likewise).
+/// (`rot_err_deg` → "rot_err (°)"; `_cm`, `_mm`, `_m`, `_s`, `_db`, `_px` likewise).
 pub fn curves(path: impl AsRef<Path>, title: &str, rows: &[CurveRow]) -> Result<(), PlotError> {
     let path = path.as_ref();
     if rows.is_empty() {
@@ -815,13 +819,14 @@ fn wants_log_scale(values: impl Iterator<Item = f64>) -> bool {
 
 /// `rot_err_deg` → "rot_err (°)", `loss` on a log axis → "loss (log scale)".
 fn metric_axis_label(metric: &str, y_scale: YScale) -> String {
-    const SUFFIXES: [(&str, &str); 6] = [
+    const SUFFIXES: [(&str, &str); 7] = [
         ("_deg", "°"),
         ("_cm", "cm"),
         ("_mm", "mm"),
         ("_m", "m"),
         ("_s", "s"),
         ("_db", "dB"),
+        ("_px", "px"),
     ];
     let (name, unit) = SUFFIXES
         .iter()
@@ -1112,7 +1117,8 @@ fn draw_frame<'a>(
 }
 
 /// Finite x and y ranges of the traces, padded by [`PAD_FRACTION`] (in log space for a log
-/// axis); `None` when no trace has a drawable point.
+/// axis, which spans at most [`LOG_SCALE_MAX_DECADES`]); `None` when no trace has a drawable
+/// point.
 fn data_ranges(traces: &[Trace], y_scale: YScale) -> Option<(Range<f64>, Range<f64>)> {
     let log_y = y_scale == YScale::Log;
     let points = traces.iter().flat_map(|t| t.segments(log_y)).flatten();
@@ -1128,7 +1134,8 @@ fn data_ranges(traces: &[Trace], y_scale: YScale) -> Option<(Range<f64>, Range<f
         return None;
     }
     let y = if log_y {
-        let (lo, hi) = padded(y.0.log10(), y.1.log10());
+        let hi = y.1.log10();
+        let (lo, hi) = padded(y.0.log10().max(hi - LOG_SCALE_MAX_DECADES), hi);
         10f64.powf(lo)..10f64.powf(hi)
     } else if y_scale == YScale::LinearFromZero && y.0 >= 0.0 {
         let (_, hi) = padded(0.0, y.1);
@@ -1171,12 +1178,25 @@ fn draw_panel(
         None => area.clone(),
     };
     if log_y {
+        // Values below the axis (a zero error's rounding noise) lie on its bottom edge.
+        let floor = y_range.start;
+        let raised: Vec<Trace> = traces
+            .iter()
+            .map(|t| Trace {
+                points: t
+                    .points
+                    .iter()
+                    .map(|&(x, y)| (x, if y > 0.0 { y.max(floor) } else { y }))
+                    .collect(),
+                style: t.style,
+            })
+            .collect();
         draw_chart(
             &area,
             x_range,
             y_range.log_scale(),
             (x_label, y_label),
-            traces,
+            &raised,
             true,
         )
     } else {
@@ -1799,6 +1819,10 @@ mod tests {
             "rot_err (°)"
         );
         assert_eq!(metric_axis_label("loss", YScale::Log), "loss (log scale)");
+        assert_eq!(
+            metric_axis_label("corner_err_px", YScale::Log),
+            "corner_err (px, log scale)"
+        );
         assert!(wants_log_scale([1.0, 1e-3].into_iter()));
         assert!(!wants_log_scale([1.0, 0.5].into_iter()));
         assert!(!wants_log_scale([1.0, 0.0, 1e-3].into_iter()));
