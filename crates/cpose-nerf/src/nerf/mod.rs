@@ -42,9 +42,11 @@
 //!
 //! Outputs: `metrics.json`
 //! (`{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err, psnr_db, ssim, …}}}`),
-//! `traj_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`, `traj_init.txt` (TUM),
-//! `trajectory_<method>.png`, `view_<k>_<method>.png` (rendered | truth), `depth_<k>_<method>.png`,
-//! `checkpoint_<method>.bin`.
+//! `traj_<condition>_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`,
+//! `traj_init.txt` (TUM), `trajectory_<condition>_<method>.png` (true, initial and estimated
+//! training cameras in evo_traj's layout, [`cpose_core::plot::trajectory_comparison`]),
+//! `view<k>_<condition>_<method>.png` (rendered | truth), `depth<k>_<condition>_<method>.png`,
+//! and the study's `curves.csv`, `curves.png` and `units/` ([`cpose_core::study`]).
 
 pub mod eval;
 pub mod poses;
@@ -57,6 +59,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
+use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{FieldContext, PoseField, PoseNetConfig, TimeRange};
@@ -938,8 +941,22 @@ fn evaluate(
         None => Vec::new(),
     };
     write_trajectory(unit.file("traj", "txt"), &views.train_times, &aligned)?;
-    eval::trajectory_plot(480, &views.train_truth, &init_aligned, &aligned)
-        .save_png(unit.file("trajectory", "png"))?;
+    let key = unit.key();
+    let title = format!(
+        "nerf {}: {} cameras, Procrustes-aligned to the truth; rotation error {:.2}°",
+        key.condition, key.method, errors.rot_err_deg
+    );
+    let drawn = plot::trajectory_comparison(
+        unit.file("trajectory", "png"),
+        &title,
+        &views.train_times,
+        Some(&views.train_truth),
+        Some(("initial poses (aligned)", &init_aligned)),
+        (&format!("{} (aligned)", key.method), &aligned),
+    );
+    if let Err(e) = drawn {
+        unit.log(format_args!("no trajectory plot: {e}"));
+    }
 
     let mut renderer = Renderer::default();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7e57);
