@@ -22,6 +22,11 @@
 //! Coordinates are BARF's normalised image coordinates (the long side spans `[−1, 1]`), so the
 //! study may run on a downscaled copy of the image (`[image] scale`) while corner errors are
 //! reported in pixels of the original.
+//!
+//! Pictures of the first `[motion] render_trajectories` motions: `patches_<image>_s<k>.png` (the
+//! true patches in time order) and `overlay_<image>_<method>[_s<k>].png` (the image with the
+//! true and estimated patch outlines beside the neural image, with a title and a legend,
+//! [`render::overlay`]).
 
 pub mod model;
 pub mod motion;
@@ -30,6 +35,7 @@ pub mod train;
 use std::path::PathBuf;
 
 use anyhow::Context;
+use cpose_core::plot::SeriesStyle;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, UnitKey};
 use cpose_core::{PoseNetConfig, Section};
@@ -593,15 +599,37 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 &first,
             );
             let warps = train::relative_to_first(study.spec.warp, &warps);
+            let corner_err_px = train::corner_error_px(&study.layout, &warps, &motion.params);
+            let psnr_db =
+                train::region_psnr(&rendered, &study.image, &study.layout, &motion.params);
             if k < study.render_trajectories {
-                let overlay = render::overlay(&study.image, &study.layout, &motion.params, &warps);
-                overlay
-                    .beside(&rendered)
-                    .save_png(unit.file("overlay", "png"))?;
+                let title = format!(
+                    "planar {}, motion {k}: {}; corner error {corner_err_px:.2} px, \
+                     PSNR {psnr_db:.1} dB",
+                    study.name,
+                    method.key()
+                );
+                let estimate = render::Estimate {
+                    label: &format!("estimated patch outlines ({})", method.key()),
+                    style: SeriesStyle::Estimate(method as usize),
+                    warps: &warps,
+                };
+                let drawn = render::overlay(
+                    unit.file("overlay", "png"),
+                    &title,
+                    (&study.image, study.original_size),
+                    &rendered,
+                    &study.layout,
+                    &motion.params,
+                    estimate,
+                );
+                if let Err(e) = drawn {
+                    unit.log(format_args!("no overlay: {e}"));
+                }
             }
             Metrics::from_serialize(&RunResult {
-                corner_err_px: train::corner_error_px(&study.layout, &warps, &motion.params),
-                psnr_db: train::region_psnr(&rendered, &study.image, &study.layout, &motion.params),
+                corner_err_px,
+                psnr_db,
                 final_loss,
                 wall_s,
                 warps,
@@ -625,40 +653,80 @@ fn median(sorted: &[f64]) -> f64 {
 pub mod render {
     //! PNG renders of the study: true and estimated patch outlines, the neural image, patches.
 
+    use std::path::Path;
+
+    use cpose_core::plot::{self, ImagePanel, Outline, PlotError, SeriesStyle};
+
     use super::train::Layout;
     use crate::image::Image;
     use crate::warp2d::Warp;
 
-    const TRUE: [f32; 3] = [0.1, 0.9, 0.2];
-    const ESTIMATED: [f32; 3] = [0.95, 0.15, 0.1];
+    /// The estimated warps of one method, as [`overlay`] draws them.
+    #[derive(Clone, Copy, Debug)]
+    pub struct Estimate<'a> {
+        /// Legend text, e.g. `"estimated patch outlines (posenet)"`.
+        pub label: &'a str,
+        /// The method's colour.
+        pub style: SeriesStyle,
+        /// Warp parameters per patch, relative to the first patch.
+        pub warps: &'a [Vec<f64>],
+    }
 
-    /// The image with every patch's true (green, wide) and estimated (red) outline and corners.
+    /// Draws a PNG at `path` ([`plot::image_panels`]): on the left the image (shown at its
+    /// working resolution, axes in pixels of the original of size `original_size`) with every
+    /// patch's true outline (black, wide) and estimated one (the method's colour) over it; on
+    /// the right `rendered`, the neural image rendered in the image frame; `title` above and a
+    /// legend naming the outlines.
     pub fn overlay(
-        image: &Image,
+        path: impl AsRef<Path>,
+        title: &str,
+        (image, original_size): (&Image, [usize; 2]),
+        rendered: &Image,
         layout: &Layout,
         truth: &[Vec<f64>],
-        estimated: &[Vec<f64>],
-    ) -> Image {
-        let mut out = image.clone();
-        let (w, h) = (image.width() as f64, image.height() as f64);
+        estimate: Estimate,
+    ) -> Result<(), PlotError> {
+        let [w, h] = original_size.map(|s| s as f64);
         let long = w.max(h);
-        let to_px = |p: [f64; 2]| [(p[0] * long + w) / 2.0, (p[1] * long + h) / 2.0];
-        // True outlines wider, so they show around estimates that cover them.
-        for (params, colour, width) in [(truth, TRUE, 3.0), (estimated, ESTIMATED, 1.0)] {
-            for p in params {
-                let warp = Warp::new(layout.warp, p);
-                let quad: Vec<[f64; 2]> = layout
-                    .corners
-                    .iter()
-                    .map(|&c| to_px(warp.apply(c)))
-                    .collect();
-                out.draw_polygon(&quad, colour, width);
-                for &c in &quad {
-                    out.draw_marker(c, colour, 1.5 * width);
-                }
-            }
-        }
-        out
+        // Normalised coordinates (the long side spans [−1, 1]) to pixels of the original.
+        let to_px = |p: [f64; 2]| ((p[0] * long + w) / 2.0, (p[1] * long + h) / 2.0);
+        let outlines_of = |params: &[Vec<f64>]| -> Vec<Vec<(f64, f64)>> {
+            params
+                .iter()
+                .map(|p| {
+                    let warp = Warp::new(layout.warp, p);
+                    layout
+                        .corners
+                        .iter()
+                        .map(|&c| to_px(warp.apply(c)))
+                        .collect()
+                })
+                .collect()
+        };
+        let outlines = [
+            Outline {
+                label: "true patch outlines".into(),
+                style: SeriesStyle::Truth,
+                polygons: outlines_of(truth),
+            },
+            Outline {
+                label: estimate.label.to_owned(),
+                style: estimate.style,
+                polygons: outlines_of(estimate.warps),
+            },
+        ];
+        let panels = [
+            ("image with the patch outlines", image, &outlines[..]),
+            ("neural image, rendered in the image frame", rendered, &[]),
+        ]
+        .map(|(title, picture, outlines)| ImagePanel {
+            title,
+            size: (picture.width(), picture.height()),
+            rgb: picture.data(),
+            extent: (w, h),
+            outlines,
+        });
+        plot::image_panels(path, title, &panels)
     }
 
     /// The ground-truth patches in a row, in time order, 2 pixels apart.
