@@ -48,11 +48,12 @@ use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::{Image, psnr};
 use cpose_nerf::metrics::ssim;
-use cpose_nerf::nerf::eval::{depth_image, trajectory_plot};
+use cpose_nerf::nerf::eval::trajectory_plot;
 use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
-use cpose_nerf::nerf::render::{Clip, RenderSettings, Renderer, render_view_with};
+use cpose_nerf::render::{
+    Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view_with,
+};
 use cpose_nerf::scene::SyntheticScene;
-use cpose_nerf::volume::{LastInterval, Sampling};
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 

@@ -31,9 +31,8 @@ use cpose_core::Timestamp;
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
 use cpose_nerf::field3d::RadianceField;
 use cpose_nerf::nerf::poses::FramePoses;
-use cpose_nerf::nerf::render::{CameraRay, RenderSettings, Renderer};
 use cpose_nerf::nerf::train::FieldOptimizer;
-use cpose_nerf::volume::Composited;
+use cpose_nerf::render::{CameraRay, Composited, RenderSettings, Renderer};
 use nalgebra::{Isometry3, Quaternion, Translation3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -524,16 +523,16 @@ mod tests {
     fn settings() -> RenderSettings {
         RenderSettings {
             samples: 24,
-            sampling: cpose_nerf::volume::Sampling::Metric {
+            sampling: cpose_nerf::render::Sampling::Metric {
                 near: 1.0,
                 far: 9.0,
             },
             background: Some([1.0; 3]),
-            clip: Some(cpose_nerf::nerf::render::Clip {
+            clip: Some(cpose_nerf::render::Clip {
                 centre: [0.0; 3],
                 radius: 1.8,
             }),
-            last_interval: cpose_nerf::volume::LastInterval::Closed,
+            last_interval: cpose_nerf::render::LastInterval::Closed,
         }
     }
 

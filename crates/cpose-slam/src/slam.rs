@@ -4,7 +4,7 @@
 //! is trained over a window of keyframes plus the current frame at their estimated poses.
 
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
-use cpose_nerf::nerf::render::CameraRay;
+use cpose_nerf::render::CameraRay;
 use nalgebra::Isometry3;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};

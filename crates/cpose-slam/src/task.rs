@@ -814,7 +814,7 @@ fn save_view(
             let depth = frame.depth.at(x, y);
             if depth > 0.0 {
                 pixels.push(PixelSample {
-                    ray: cpose_nerf::nerf::render::CameraRay::new(
+                    ray: cpose_nerf::render::CameraRay::new(
                         0,
                         &pose,
                         camera.ray_direction_cam(x, y),

@@ -1,7 +1,7 @@
 //! Evaluation of a trained run, as BARF (algorithms.md §2.4–2.5): pose errors after Procrustes
 //! alignment of the camera centres, novel views rendered from the ground-truth test poses
 //! mapped into the learned frame, with and without test-time photometric refinement of each
-//! test pose, PSNR and SSIM; and pictures (depth maps, a top-down trajectory plot).
+//! test pose, PSNR and SSIM; and a top-down trajectory plot.
 
 use cpose_core::geometry::se3_exp;
 use cpose_core::nn::Adam;
@@ -9,11 +9,10 @@ use nalgebra::{Isometry3, Vector6};
 use rand::seq::index::sample;
 use rand_chacha::ChaCha8Rng;
 
-use super::render::{CameraRay, RenderSettings, Renderer};
 use crate::camera::{PinholeCamera, PoseGradient};
 use crate::field3d::RadianceField;
 use crate::image::Image;
-use crate::volume::Composited;
+use crate::render::{CameraRay, Composited, RenderSettings, Renderer};
 
 /// Test-time photometric refinement (BARF `evaluate_test_time_photometric_optim`): a fresh
 /// camera-frame correction `δ ∈ se(3)` of the pose, `world_from_camera · Exp(δ)`, fitted by Adam
@@ -79,27 +78,6 @@ pub fn refine_pose(
         adam.step(&mut delta, g.as_slice(), refinement.lr);
     }
     current(&delta)
-}
-
-/// A depth map as a grey image: near white, far black, transparent pixels (opacity below ½)
-/// black; `[near, far]` spans the grey ramp.
-pub fn depth_image(
-    width: usize,
-    height: usize,
-    depth: &[f32],
-    opacity: &[f32],
-    near: f64,
-    far: f64,
-) -> Image {
-    Image::from_fn(width, height, |x, y| {
-        let i = y * width + x;
-        if opacity[i] < 0.5 {
-            return [0.0; 3];
-        }
-        let v = (1.0 - (depth[i] as f64 / opacity[i] as f64 - near) / (far - near)).clamp(0.0, 1.0)
-            as f32;
-        [v, v, v]
-    })
 }
 
 /// Colours of the trajectory plot.

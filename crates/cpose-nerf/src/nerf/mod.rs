@@ -48,7 +48,6 @@
 
 pub mod eval;
 pub mod poses;
-pub mod render;
 pub mod train;
 
 use std::collections::BTreeMap;
@@ -70,12 +69,12 @@ use crate::data::{Dataset, blender, llff};
 use crate::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use crate::image::Image;
 use crate::metrics::ssim;
+use crate::render::{
+    Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view,
+};
 use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
-use crate::volume::LastInterval;
-use crate::volume::Sampling;
 use eval::Refinement;
 use poses::{FramePoses, PoseSchedules};
-use render::{Clip, RenderSettings, Renderer, render_view};
 use train::{Schedule, Trainer};
 
 inventory::submit! {
@@ -995,7 +994,7 @@ fn evaluate(
             view.image
                 .beside(image)
                 .save_png(input.run_dir.file(format!("view_{k}_{}.png", method.key())))?;
-            eval::depth_image(
+            depth_image(
                 views.camera.width,
                 views.camera.height,
                 &view.depth,

@@ -24,11 +24,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::poses::FramePoses;
-use super::render::{CameraRay, RenderSettings, Renderer};
 use crate::camera::{PinholeCamera, PoseGradient};
 use crate::field3d::RadianceField;
 use crate::image::Image;
-use crate::volume::Composited;
+use crate::render::{CameraRay, Composited, RenderSettings, Renderer};
 
 /// Optimisation settings of one run.
 #[derive(Clone, Debug, PartialEq)]
@@ -365,9 +364,8 @@ pub(super) mod tests {
     use super::*;
     use crate::field3d::{HashGridConfig, SceneBounds};
     use crate::nerf::poses::PoseSchedules;
+    use crate::render::{LastInterval, Sampling};
     use crate::scene::{MonocularOrbit, SyntheticScene};
-    use crate::volume::LastInterval;
-    use crate::volume::Sampling;
 
     /// A small run on the synthetic scene: 4 views of 16×16 along the orbit, a small hash grid,
     /// BARF's per-frame correction starting at the true poses.
