@@ -9,6 +9,7 @@ pub use cpose_core;
 
 pub mod camera;
 pub mod data;
+mod error;
 pub mod field2d;
 pub mod field3d;
 mod field_common;
@@ -20,3 +21,5 @@ pub mod planar;
 pub mod render;
 pub mod scene;
 pub mod warp2d;
+
+pub use error::DataError;
