@@ -158,7 +158,7 @@ impl Slam {
         })
     }
 
-    /// Mounts the camera on a body (an IMU rig) at `body_from_camera`: from then on the pose
+    /// Mounts the camera on a body (a sensor rig) at `body_from_camera`: from then on the pose
     /// model tracks `world_from_body`, and frames are seen from `world_from_body ∘
     /// body_from_camera` (the estimates stay camera poses). Set it before the first frame.
     pub fn set_body_from_camera(&mut self, body_from_camera: Isometry3<f64>) {
