@@ -8,6 +8,10 @@ use cpose_nerf::DataError;
 /// Errors of the event readers, writers and simulator, and of event streams built or queried in
 /// memory ([`crate::EventStream`]); file errors name the file and, where it helps, the line,
 /// array or entry.
+///
+/// The byte-level ZIP reader reports [`crate::zip::ZipError`] (and `cpose-nerf`'s NumPy parser
+/// its `NpyError`), which the `.npz` readers turn into [`EventsError::Format`] with the file and
+/// the entry named.
 #[derive(Debug, thiserror::Error)]
 pub enum EventsError {
     /// A file or folder could not be read.
