@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::util::{TempDir, temp_dir};
+use crate::util::{TempDir, temp_dir, unit_file};
 
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -221,4 +221,56 @@ fn nerf_resumes_after_kill_9_with_the_uninterrupted_results() {
     ];
     let (whole, cut) = kill_and_resume("configs/nerf_synthetic.toml", &settings, 1, true);
     same_trajectories(&whole, &cut);
+}
+
+/// `slam` checkpoints its map, estimates and pose model: the killed method continues after its
+/// last frame. The per-frame tracking log keeps the rows from before the kill, none twice, and
+/// its errors are those of the trajectory.
+#[test]
+fn slam_resumes_after_kill_9_with_the_uninterrupted_trajectory() {
+    let data = temp_dir("resume-room");
+    let path = format!("data.path={}", data.display());
+    let settings = [
+        "synthetic.frames=24",
+        "synthetic.width=48",
+        "tracking.edge=2",
+        "tracking.pixels=64",
+        "mapping.pixels=128",
+        "mapping.first_iterations=40",
+        "slam.methods=[\"baseline\", \"prev\"]",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+        &path,
+    ];
+    let (whole, cut) = kill_and_resume("configs/synthetic_room.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+    let rows = |dir: &Path| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(unit_file(dir, "tracking", "prev", "csv")).unwrap();
+        let mut lines = text.lines();
+        assert!(
+            lines
+                .next()
+                .unwrap()
+                .starts_with("frame,time_s,start_error_cm,error_cm,")
+        );
+        lines
+            .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+            .collect()
+    };
+    let (whole_rows, cut_rows) = (rows(&whole), rows(&cut));
+    let frames: Vec<f64> = whole_rows.iter().map(|r| r[0]).collect();
+    assert_eq!(frames, (1..24).map(f64::from).collect::<Vec<_>>());
+    assert_eq!(whole_rows, cut_rows);
+    let a = cpose_core::eval::read_tum(unit_file(&whole, "traj", "prev", "txt")).unwrap();
+    let gt = cpose_core::eval::read_tum(whole.join("traj_gt.txt")).unwrap();
+    for r in &whole_rows {
+        let (i, start_cm, cm, moved_cm) = (r[0] as usize, r[2], r[3], r[6]);
+        let truth = 100.0 * (a.poses()[i].translation.vector - gt.poses()[i].translation.vector);
+        assert!(
+            (cm - truth.norm()).abs() < 2e-3,
+            "frame {i}: {cm} against {truth}"
+        );
+        // The start is where tracking began: the two errors differ by at most the move.
+        assert!((cm - start_cm).abs() <= moved_cm + 2e-3, "frame {i}: {r:?}");
+    }
 }

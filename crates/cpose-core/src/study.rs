@@ -635,7 +635,6 @@ fn metrics_line(metrics: &Metrics, columns: &[String]) -> String {
     s
 }
 
-
 /// `path` with `suffix` appended to its file name.
 fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
     let mut name = path.file_name().unwrap_or_default().to_os_string();
@@ -737,6 +736,11 @@ impl Unit<'_> {
         }
         self.progress.set_message(format!("{} {line}", self.name));
         self.log(line);
+    }
+
+    /// Wall seconds the unit has run, over every session.
+    pub fn wall_secs(&self) -> f64 {
+        self.elapsed().0
     }
 
     /// Whether a checkpoint is due: `[run] checkpoint_secs` have passed since the last one
