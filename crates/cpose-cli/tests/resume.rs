@@ -70,6 +70,20 @@ fn kill_and_resume(
     finished: usize,
     mid_unit: bool,
 ) -> (TempDir, TempDir) {
+    let ready = |dir: &Path| {
+        count(dir, "result.json") >= finished && (!mid_unit || count(dir, "checkpoint.bin") > 0)
+    };
+    kill_when(config, settings, ready, finished, mid_unit)
+}
+
+/// [`kill_and_resume`] with the moment of the kill chosen by `ready`.
+fn kill_when(
+    config: &str,
+    settings: &[&str],
+    ready: impl Fn(&Path) -> bool,
+    finished: usize,
+    mid_unit: bool,
+) -> (TempDir, TempDir) {
     let whole = temp_dir("resume-whole");
     let out = cpose(&run_args(config, settings, &whole));
     assert!(
@@ -77,28 +91,43 @@ fn kill_and_resume(
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let cut = interrupt(config, settings, ready, finished, mid_unit);
+    assert_eq!(metrics(&cut), metrics(&whole));
+    (whole, cut)
+}
+
+/// Runs `config`, kills it with SIGKILL once `ready` holds and resumes it: at least `finished`
+/// units are kept by the resume and, with `mid_unit`, one continues from its checkpoint.
+fn interrupt(
+    config: &str,
+    settings: &[&str],
+    ready: impl Fn(&Path) -> bool,
+    finished: usize,
+    mid_unit: bool,
+) -> TempDir {
     let cut = temp_dir("resume-cut");
     let mut child = Command::new(env!("CARGO_BIN_EXE_cpose"))
         .current_dir(workspace_root())
         .args(run_args(config, settings, &cut))
+        .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
     let started = Instant::now();
-    while count(&cut, "result.json") < finished || (mid_unit && count(&cut, "checkpoint.bin") == 0)
-    {
+    while !ready(&cut) {
         assert!(
             child.try_wait().unwrap().is_none(),
             "the run finished before it could be killed"
         );
         assert!(
             started.elapsed().as_secs() < 600,
-            "no checkpoint in 10 minutes"
+            "not ready to be killed in 10 minutes"
         );
         std::thread::sleep(Duration::from_millis(5));
     }
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
     let done_before = count(&cut, "result.json");
+    assert!(done_before >= finished);
     let out = cpose(&[
         "run".into(),
         "--resume".into(),
@@ -116,14 +145,15 @@ fn kill_and_resume(
         done_before,
         "{log}"
     );
-    assert_eq!(log.contains("resumed after step"), mid_unit, "{log}");
-    assert_eq!(metrics(&cut), metrics(&whole));
+    if mid_unit {
+        assert!(log.contains("resumed after step"), "{log}");
+    }
     assert_eq!(
         count(&cut, "checkpoint.bin"),
         0,
         "finished units keep no checkpoint"
     );
-    (whole, cut)
+    cut
 }
 
 /// Every `traj_*.txt` of `a` equals the one of `b`, byte for byte.
@@ -272,5 +302,74 @@ fn slam_resumes_after_kill_9_with_the_uninterrupted_trajectory() {
         );
         // The start is where tracking began: the two errors differ by at most the move.
         assert!((cm - start_cm).abs() <= moved_cm + 2e-3, "frame {i}: {r:?}");
+    }
+}
+
+/// `slam_imu` runs its methods through the same units as `slam`.
+#[test]
+fn slam_imu_resumes_after_kill_9_with_the_uninterrupted_results() {
+    let data = temp_dir("resume-imu");
+    let path = format!("data.path={}", data.display());
+    let settings = [
+        "synthetic.width=48",
+        "synthetic.frames=21",
+        "tracking.edge=2",
+        "tracking.pixels=64",
+        "tracking.iterations=5",
+        "mapping.pixels=128",
+        "mapping.first_iterations=20",
+        "mapping.iterations=5",
+        "imu.predict_steps=3",
+        "mesh.voxel=0",
+        "slam.methods=[\"baseline\", \"tight\"]",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+        &path,
+    ];
+    let (whole, cut) = kill_and_resume("configs/synthetic_imu.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+}
+
+/// `synth_room` is one unit: killed while it writes the room, it writes it again.
+#[test]
+fn synth_room_resumes_after_kill_9_with_the_same_room() {
+    let (a, b) = (temp_dir("resume-synth-a"), temp_dir("resume-synth-b"));
+    let (path_a, path_b) = (
+        format!("output.path={}", a.display()),
+        format!("output.path={}", b.display()),
+    );
+    let small = ["synthetic.frames=60", "synthetic.width=48", "run.threads=1"];
+    let whole = temp_dir("resume-synth-whole");
+    let mut settings: Vec<&str> = small.to_vec();
+    settings.push(&path_a);
+    let out = cpose(&run_args("configs/synth_room.toml", &settings, &whole));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The interrupted run writes into its own folder, killed once a few frames are there.
+    let mut settings: Vec<&str> = small.to_vec();
+    settings.push(&path_b);
+    let frames = |dir: &Path| std::fs::read_dir(dir.join("results")).map_or(0, |e| e.count());
+    let target = b.to_path_buf();
+    let cut = interrupt(
+        "configs/synth_room.toml",
+        &settings,
+        move |_| frames(&target) >= 4,
+        0,
+        false,
+    );
+    assert_eq!(metrics(&cut)["room"]["synthetic"]["frames"], 60);
+    for name in [
+        "traj.txt",
+        "results/frame000059.jpg",
+        "results/depth000059.png",
+    ] {
+        assert_eq!(
+            std::fs::read(a.join(name)).ok(),
+            std::fs::read(b.join(name)).ok(),
+            "{name}"
+        );
     }
 }

@@ -252,8 +252,14 @@ fn config_hash(config: &Config) -> String {
 /// resuming; [`Study::run`] calls it too).
 pub fn check_resume(dir: &Path, task: &str, config: &Config) -> Result<(), ResumeError> {
     let path = dir.join("study.json");
-    let text =
-        std::fs::read_to_string(&path).map_err(|_| ResumeError::NotAStudy(dir.to_owned()))?;
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        // Killed before its study began: nothing to keep, the study starts from the beginning.
+        // Results without a manifest are an older cpose's.
+        if dir.join("metrics.json").exists() {
+            return Err(ResumeError::NotAStudy(dir.to_owned()));
+        }
+        return Ok(());
+    };
     let manifest: Manifest = serde_json::from_str(&text).map_err(|e| ResumeError::Corrupt {
         path: path.clone(),
         message: format!("not a study manifest: {e}"),
@@ -1069,6 +1075,9 @@ mod tests {
     fn resume_refuses_other_tasks_configs_and_non_studies() {
         let dir = TempDir::new("study-refuse");
         let config = Config::from_text("c.toml", CONFIG);
+        // Killed before the study began: it starts from the beginning.
+        check_resume(&dir, "demo", &config).unwrap();
+        std::fs::write(dir.join("metrics.json"), "{}").unwrap();
         let e = check_resume(&dir, "demo", &config).unwrap_err();
         assert!(e.to_string().contains("no study.json"), "{e}");
         std::fs::write(dir.join("study.json"), "{").unwrap();
