@@ -2,6 +2,9 @@
 //! middle of a unit and resumed ends with the metrics and files of an uninterrupted run with the
 //! same seed; finished units are not run again; folders that cannot be resumed say why.
 
+// The helpers below are test code too: a failed file operation should just fail the test.
+#![allow(clippy::unwrap_used)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};

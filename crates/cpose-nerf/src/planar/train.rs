@@ -95,6 +95,10 @@ pub fn sample_patches(image: &Image, layout: &Layout, truth: &[Vec<f64>]) -> Vec
         .collect()
 }
 
+/// Called after every training step with the steps done, the step's loss and the warp
+/// parameters it was computed with.
+pub type OnStep<'a> = dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()> + 'a;
+
 /// One method on one motion: the neural image, the pose model and the step's buffers (reused, so
 /// a step does not allocate).
 pub struct Trainer<'a> {
@@ -228,7 +232,7 @@ impl<'a> Trainer<'a> {
     /// parameters that loss was computed with.
     pub fn run(
         mut self,
-        on_step: &mut dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()>,
+        on_step: &mut OnStep<'_>,
     ) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
         let mut loss = f64::NAN;
         while self.it < self.schedule.iterations {
