@@ -28,14 +28,34 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use cpose_core::Config;
 use cpose_core::eval::{self, Alignment};
+use cpose_core::provenance::{Build, Recorder, Session};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{RunDir, RunDirOptions};
+use cpose_core::study;
 
 mod table;
 
+/// The git commit this binary was built from (40 hex digits), empty when unknown.
+const GIT_COMMIT: &str = env!("CPOSE_GIT_COMMIT");
+/// `true` or `false`: whether the build had uncommitted changes; empty when unknown.
+const GIT_DIRTY: &str = env!("CPOSE_GIT_DIRTY");
+
+/// The version and git commit of this build, for `provenance.json`.
+pub fn build_info() -> Build {
+    Build {
+        version: env!("CARGO_PKG_VERSION").to_owned(),
+        commit: (!GIT_COMMIT.is_empty()).then(|| GIT_COMMIT.to_owned()),
+        dirty: match GIT_DIRTY {
+            "true" => Some(true),
+            "false" => Some(false),
+            _ => None,
+        },
+    }
+}
+
 /// Continuous camera poses: run experiments, list tasks and pose fields.
 #[derive(Debug, Parser)]
-#[command(name = "cpose", version)]
+#[command(name = "cpose", version, long_version = env!("CPOSE_LONG_VERSION"))]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -125,6 +145,11 @@ where
     I: IntoIterator<Item = T>,
     T: Into<OsString> + Clone,
 {
+    let args: Vec<OsString> = args.into_iter().map(Into::into).collect();
+    let command_line: Vec<String> = args
+        .iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
     let cli = match Cli::try_parse_from(args) {
         Ok(cli) => cli,
         Err(err) => {
@@ -135,7 +160,7 @@ where
     };
     let result = match cli.command {
         Command::List => list(),
-        Command::Run(args) => run(&args),
+        Command::Run(args) => run(&args, command_line),
         Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
         Command::Table(args) => table::metrics_table(&args.runs, &args.metrics)
             .map(|text| {
@@ -189,8 +214,9 @@ fn list() -> Result<(), Failure> {
     Ok(())
 }
 
-/// `cpose run CONFIG`: load, look up, create the run folder, save the config, run, report.
-fn run(args: &RunArgs) -> Result<(), Failure> {
+/// `cpose run CONFIG`: load, look up, create the run folder, record the provenance, save the
+/// config, run, report.
+fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
     registry::check_unique().map_err(|e| Failure::Run(e.into()))?;
     let usage = |e: anyhow::Error| Failure::Usage(e);
     let (config_path, out, allow_existing) = match (&args.resume, &args.config) {
@@ -207,6 +233,11 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
     let config = Config::load(&config_path, &args.overrides).map_err(|e| usage(e.into()))?;
     let run_config = config.run_config().map_err(|e| usage(e.into()))?;
     let task = registry::task_for(&config).map_err(|e| usage(e.into()))?;
+    if let Some(dir) = &args.resume {
+        // Whether the folder can be resumed (a study of this task and config, unfinished),
+        // before anything runs.
+        study::check_resume(dir, task.name, &config).map_err(|e| usage(e.into()))?;
+    }
     run_config.init_thread_pool();
 
     let options = RunDirOptions {
@@ -216,9 +247,73 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
         echo_log: !args.quiet,
     };
     let run_dir = RunDir::create(task.name, &options).map_err(|e| usage(e.into()))?;
-    run_dir
-        .write_config(&config)
+    let build = build_info();
+    let session = Session::begin(&build, command_line, run_config.threads);
+    let recorder = Recorder::start(&run_dir, session, args.resume.is_some())
         .map_err(|e| Failure::Run(e.into()))?;
+    let machine = &recorder.session().machine;
+    run_dir.log(format_args!(
+        "cpose {} on {}, {} thread{}",
+        build.describe(),
+        machine.cpu_model.as_deref().unwrap_or("unknown CPU"),
+        run_config.threads,
+        if run_config.threads == 1 { "" } else { "s" }
+    ));
+
+    let result = run_task(args, task, &config, &config_path, &run_config, &run_dir);
+    let outcome = result.as_ref().map(|_| ()).map_err(|e| format!("{e:#}"));
+    let recorded = recorder.finish(&run_dir, outcome);
+    match (result, recorded) {
+        (Ok(()), Ok(session)) => {
+            run_dir.log(format_args!(
+                "done: {:.1} s wall, {} CPU, peak memory {}",
+                session.wall_s.unwrap_or(0.0),
+                session
+                    .cpu_s
+                    .map_or_else(|| "unknown".to_owned(), |s| format!("{s:.1} s")),
+                session.peak_rss_bytes.map_or_else(
+                    || "unknown".to_owned(),
+                    |b| format!("{:.0} MiB", b as f64 / f64::from(1 << 20))
+                )
+            ));
+            let _ = writeln!(std::io::stdout().lock(), "{}", run_dir.path().display());
+            Ok(())
+        }
+        (Ok(()), Err(e)) => {
+            let err = anyhow::Error::from(e)
+                .context("the run finished, but its provenance was not saved");
+            run_dir.log(format_args!("failed: {err:#}"));
+            Err(Failure::Run(err))
+        }
+        (Err(err), recorded) => {
+            run_dir.log(format_args!("failed: {err:#}"));
+            if let Err(e) = recorded {
+                run_dir.log(format_args!("and its provenance was not saved: {e}"));
+            }
+            // A task that rejects its config (typo, unknown pose field) or its run folder is a
+            // usage error.
+            if err
+                .chain()
+                .any(|e| e.is::<cpose_core::ConfigError>() || e.is::<study::ResumeError>())
+            {
+                Err(Failure::Usage(err))
+            } else {
+                Err(Failure::Run(err))
+            }
+        }
+    }
+}
+
+/// Saves the config and runs the task in `run_dir`; errors carry the task's name and folder.
+fn run_task(
+    args: &RunArgs,
+    task: &registry::Task,
+    config: &Config,
+    config_path: &Path,
+    run_config: &cpose_core::RunConfig,
+    run_dir: &RunDir,
+) -> anyhow::Result<()> {
+    run_dir.write_config(config)?;
     run_dir.log(format_args!(
         "task {} with config {}{}",
         task.name,
@@ -229,37 +324,20 @@ fn run(args: &RunArgs) -> Result<(), Failure> {
             ""
         }
     ));
-
     let input = TaskInput {
-        config: &config,
-        run_dir: &run_dir,
-        run: &run_config,
+        config,
+        run_dir,
+        run: run_config,
         show_progress: !args.quiet,
         resume: args.resume.is_some(),
     };
-    let result = (task.run)(&input).with_context(|| {
+    (task.run)(&input).with_context(|| {
         format!(
             "task {} failed (run folder {})",
             task.name,
             run_dir.path().display()
         )
-    });
-    match result {
-        Ok(()) => {
-            run_dir.log("done");
-            let _ = writeln!(std::io::stdout().lock(), "{}", run_dir.path().display());
-            Ok(())
-        }
-        Err(err) => {
-            run_dir.log(format_args!("failed: {err:#}"));
-            // A task that rejects its config (typo, unknown pose field) is a config error.
-            if err.chain().any(|e| e.is::<cpose_core::ConfigError>()) {
-                Err(Failure::Usage(err))
-            } else {
-                Err(Failure::Run(err))
-            }
-        }
-    }
+    })
 }
 
 /// `cpose eval ate GT EST`: association, alignment and translation-error statistics (metres).

@@ -3,7 +3,8 @@
 //!
 //! Every numeric leaf of a `metrics.json` is a cell: its last key names the column, the keys
 //! before it (with the run folder's name in front) name the row. A `null` leaf (a metric that
-//! was not computed) is an empty cell. So the NeRF task's
+//! was not computed) is an empty cell. A JSON integer (a count such as `frames: 500`) prints as
+//! an integer; other numbers with four significant digits. So the NeRF task's
 //! `{"synthetic": {"posenet": {"rot_err_deg": 0.3}}}` in `runs/rm60` is the cell
 //! (`rm60 synthetic/posenet`, `rot_err_deg`).
 
@@ -11,10 +12,10 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use serde_json::Value;
+use serde_json::{Number, Value};
 
 /// One row: its name and its cells by column (`None`: `null`).
-type Row = (String, BTreeMap<String, Option<f64>>);
+type Row = (String, BTreeMap<String, Option<Number>>);
 
 /// The Markdown table of the runs in `dirs`, restricted to `columns` (in that order) when not
 /// empty, else all columns sorted by name.
@@ -56,7 +57,7 @@ pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<Str
         out.push_str(&format!("| {name} |"));
         for n in &names {
             match cells.get(n) {
-                Some(Some(v)) => out.push_str(&format!(" {} |", format_number(*v))),
+                Some(Some(v)) => out.push_str(&format!(" {} |", format_cell(v))),
                 _ => out.push_str(" |"),
             }
         }
@@ -71,11 +72,12 @@ fn collect_rows(value: &Value, run: &str, path: &str, rows: &mut Vec<Row>) {
     let Value::Object(map) = value else {
         return;
     };
-    let cells: BTreeMap<String, Option<f64>> = map
+    let cells: BTreeMap<String, Option<Number>> = map
         .iter()
         .filter_map(|(k, v)| match v {
             Value::Null => Some((k.clone(), None)),
-            _ => v.as_f64().map(|x| (k.clone(), Some(x))),
+            Value::Number(x) => Some((k.clone(), Some(x.clone()))),
+            _ => None,
         })
         .collect();
     if !cells.is_empty() {
@@ -95,6 +97,15 @@ fn collect_rows(value: &Value, run: &str, path: &str, rows: &mut Vec<Row>) {
             };
             collect_rows(v, run, &path, rows);
         }
+    }
+}
+
+/// An integer as it is (`500`, not `500.0`); other numbers by [`format_number`].
+fn format_cell(v: &Number) -> String {
+    if v.is_i64() || v.is_u64() {
+        v.to_string()
+    } else {
+        v.as_f64().map_or_else(|| v.to_string(), format_number)
     }
 }
 
@@ -155,5 +166,26 @@ mod tests {
             format!("{err:#}").contains("missing/metrics.json"),
             "{err:#}"
         );
+    }
+
+    #[test]
+    fn integers_print_as_integers_and_other_numbers_keep_four_digits() {
+        let dir = cpose_core::testing::TempDir::new("table-int");
+        let run = dir.join("slam");
+        std::fs::create_dir_all(&run).unwrap();
+        std::fs::write(
+            run.join("metrics.json"),
+            r#"{"baseline": {"frames": 500, "lost_frames": 0, "held_out_poses": 129,
+                "big": 12345678901, "negative": -3, "ate_rmse_cm": 500.0, "psnr_db": 27.123456,
+                "ratio": 0.000123, "zero": 0.0}}"#,
+        )
+        .unwrap();
+        let table = metrics_table(&[run], &[]).unwrap();
+        let expected = "\
+| run | ate_rmse_cm | big | frames | held_out_poses | lost_frames | negative | psnr_db | ratio | zero |
+|---|---|---|---|---|---|---|---|---|---|
+| slam baseline | 500.0 | 12345678901 | 500 | 129 | 0 | -3 | 27.12 | 1.230e-4 | 0 |
+";
+        assert_eq!(table, expected);
     }
 }

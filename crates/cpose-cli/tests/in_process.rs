@@ -249,3 +249,54 @@ fn errors_inside_the_task_are_config_or_run_failures() {
         assert!(log.contains(expected), "{set}: {log}");
     }
 }
+
+#[test]
+fn a_resumed_run_keeps_the_provenance_of_every_session() {
+    let dir = temp_dir("resume-provenance");
+    let config = write(&dir, "x.toml", CONFIG);
+    let out = dir.join("run");
+    let first = [
+        "run",
+        config.to_str().unwrap(),
+        "--set",
+        "fail=true",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    assert_eq!(cpose(&first), ExitCode::from(1));
+    // The resumed session reads the saved config, which still fails: set it right.
+    let saved = read(out.join("config.toml")).replace("fail = true", "fail = false");
+    std::fs::write(out.join("config.toml"), saved).unwrap();
+    assert_eq!(
+        cpose(&["run", "--resume", out.to_str().unwrap(), "-q"]),
+        ExitCode::SUCCESS
+    );
+    let text = read(out.join("provenance.json"));
+    let p: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let sessions = p["sessions"].as_array().unwrap();
+    assert_eq!(sessions.len(), 2, "{text}");
+    let expected: Vec<&str> = std::iter::once("cpose").chain(first).collect();
+    assert_eq!(
+        sessions[0]["command_line"],
+        serde_json::json!(expected),
+        "{text}"
+    );
+    assert!(
+        sessions[0]["outcome"]
+            .as_str()
+            .unwrap()
+            .starts_with("failed: task zz_cli_fit failed (run folder"),
+        "{text}"
+    );
+    assert_eq!(sessions[1]["command_line"][2], "--resume");
+    assert_eq!(sessions[1]["outcome"], "finished");
+    for s in sessions {
+        assert!(s["wall_s"].as_f64().is_some_and(|w| w >= 0.0), "{text}");
+        assert!(s["finished_utc"].is_string(), "{text}");
+        assert_eq!(s["threads"], 1);
+    }
+    // The top level is the newest session.
+    assert_eq!(p["command_line"], sessions[1]["command_line"]);
+    assert_eq!(p["outcome"], "finished");
+}

@@ -14,5 +14,7 @@ mod commands;
 // Runs `cpose_cli::main_with_args` in this process, with a task and a pose field registered
 // by the test itself: full runs, run folders, errors raised inside tasks.
 mod in_process;
+// `cpose run --resume` after SIGKILL, for every task on the study skeleton.
+mod resume;
 // Temporary folders and config files.
 mod util;

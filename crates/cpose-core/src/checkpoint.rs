@@ -10,6 +10,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use rand_chacha::ChaCha8Rng;
+
+use crate::PoseField;
+use crate::nn::Adam;
 
 /// The first line of every checkpoint.
 const HEADER: &[u8] = b"cpose checkpoint v3\n";
@@ -74,6 +78,29 @@ impl Writer {
             })
             .collect();
         self.f64s(&flat);
+    }
+
+    /// A pose field's parameters, slice by slice.
+    pub fn pose_field(&mut self, field: &dyn PoseField) {
+        self.u64(field.num_params() as u64);
+        field.params(&mut |_, p| self.f32s(p));
+    }
+
+    /// An optimiser's moments and step count.
+    pub fn adam(&mut self, adam: &Adam<f32>) {
+        let (m, v, t) = adam.state();
+        self.f32s(m);
+        self.f32s(v);
+        self.u64(t);
+    }
+
+    /// A random generator's seed, stream and position, so that it continues exactly.
+    pub fn rng(&mut self, rng: &ChaCha8Rng) {
+        self.0.extend_from_slice(&rng.get_seed());
+        self.u64(rng.get_stream());
+        let pos = rng.get_word_pos();
+        self.u64(pos as u64);
+        self.u64((pos >> 64) as u64);
     }
 
     /// The file's bytes: everything written, then the CRC-32 trailer.
@@ -202,6 +229,55 @@ impl Reader {
             .collect())
     }
 
+    /// Restores parameters written by [`Writer::pose_field`] into a field of the same shape.
+    pub fn pose_field(&mut self, field: &mut dyn PoseField) -> anyhow::Result<()> {
+        let n = self.u64()?;
+        if n != field.num_params() as u64 {
+            bail!(
+                "{}: the checkpoint's pose field has {n} parameters, this one {}",
+                self.path.display(),
+                field.num_params()
+            );
+        }
+        let mut result = Ok(());
+        field.params_mut(&mut |_, p| {
+            if result.is_err() {
+                return;
+            }
+            result = self.f32s().and_then(|v| {
+                if v.len() != p.len() {
+                    bail!("{}: corrupt pose-field parameters", self.path.display());
+                }
+                p.copy_from_slice(&v);
+                Ok(())
+            });
+        });
+        result
+    }
+
+    /// Restores an optimiser written by [`Writer::adam`] into one of the same size.
+    pub fn adam(&mut self, adam: &mut Adam<f32>) -> anyhow::Result<()> {
+        let (m, v, t) = (self.f32s()?, self.f32s()?, self.u64()?);
+        if !adam.set_state(&m, &v, t) {
+            bail!(
+                "{}: the checkpoint's optimiser does not match this model",
+                self.path.display()
+            );
+        }
+        Ok(())
+    }
+
+    /// A random generator written by [`Writer::rng`], at the position it had.
+    pub fn rng(&mut self) -> anyhow::Result<ChaCha8Rng> {
+        use rand::SeedableRng as _;
+        let seed: [u8; 32] = self.take(32)?.try_into().expect("32 bytes");
+        let mut rng = ChaCha8Rng::from_seed(seed);
+        rng.set_stream(self.u64()?);
+        let (lo, hi) = (self.u64()?, self.u64()?);
+        rng.set_word_pos(u128::from(lo) | (u128::from(hi) << 64));
+        Ok(rng)
+    }
+
     /// Poses written by [`Writer::poses`].
     pub fn poses(&mut self) -> anyhow::Result<Vec<Isometry3<f64>>> {
         let flat = self.f64s()?;
@@ -247,12 +323,18 @@ mod tests {
         w.str("seq-01/posenet");
         w.f32s(&[1.5, -2.25]);
         w.poses(&[pose]);
+        let mut rng = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+        let _: u64 = rand::RngExt::random(&mut rng);
+        w.rng(&rng);
         w.save(&path).unwrap();
         let mut r = Reader::open(&path).unwrap();
         assert_eq!(r.u64().unwrap(), 42);
         assert_eq!(r.str().unwrap(), "seq-01/posenet");
         assert_eq!(r.f32s().unwrap(), vec![1.5, -2.25]);
         assert_eq!(r.poses().unwrap()[0], pose);
+        let mut back = r.rng().unwrap();
+        let next = |g: &mut ChaCha8Rng| -> u64 { rand::RngExt::random(g) };
+        assert_eq!(next(&mut back), next(&mut rng));
         let err = r.u64().unwrap_err().to_string();
         assert!(err.contains("ends early"), "{err}");
 

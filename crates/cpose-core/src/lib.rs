@@ -2,8 +2,9 @@
 //!
 //! The [`PoseField`] trait and its implementations (PoseNet, per-frame poses, B-splines,
 //! composition), SE(3) helpers and conventions, a small neural-network kit with exact time
-//! derivatives, trajectory I/O and evaluation that agrees with evo, and the task and pose-field
-//! registries the `cpose` command line is built on.
+//! derivatives, trajectory I/O and evaluation that agrees with evo, plots of trajectories, errors
+//! and training curves ([`plot`]), and the task and pose-field registries the `cpose` command
+//! line is built on.
 //!
 //! Not for: scenes, rendering or datasets of images (see `cpose-nerf` and the crates above it).
 
@@ -16,6 +17,7 @@ pub mod eval;
 pub mod fs;
 pub mod geometry;
 pub mod nn;
+pub mod plot;
 pub mod pose_field;
 pub mod progress;
 pub mod provenance;

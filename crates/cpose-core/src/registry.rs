@@ -52,8 +52,8 @@ pub struct TaskInput<'a> {
     pub run: &'a RunConfig,
     /// Whether progress bars may draw (they also need stderr to be a terminal).
     pub show_progress: bool,
-    /// `cpose run --resume`: continue from the checkpoints in the run folder. Tasks that keep
-    /// none (all but `slam`) run again from the start.
+    /// `cpose run --resume`: continue the study in the run folder ([`crate::study`]): finished
+    /// units are kept, unfinished ones continue from their checkpoints.
     pub resume: bool,
 }
 

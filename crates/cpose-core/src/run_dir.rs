@@ -1,7 +1,7 @@
 //! The run folder: everything one run writes, each file written atomically.
 //!
-//! Layout: `config.toml` (the resolved config), `metrics.json`, trajectories (TUM format), PNGs
-//! and `log.txt`.
+//! Layout: `config.toml` (the resolved config), `metrics.json`, trajectories (TUM format), PNGs,
+//! `log.txt` and `provenance.json` (see [`crate::provenance`]).
 //!
 //! Where it goes: the folder given explicitly (`cpose run --out DIR`), else `[run] out_dir`, else
 //! `runs/<task>-<YYYYmmdd-HHMMSS>` (UTC) in the current directory; missing parents are created.
@@ -225,7 +225,7 @@ fn utc_compact(t: SystemTime) -> String {
 }
 
 /// `YYYY-mm-ddTHH:MM:SS.mmmZ`, for log lines.
-fn utc_iso(t: SystemTime) -> String {
+pub(crate) fn utc_iso(t: SystemTime) -> String {
     let (y, mo, d, h, mi, s, ms) = utc_parts(t);
     format!("{y:04}-{mo:02}-{d:02}T{h:02}:{mi:02}:{s:02}.{ms:03}Z")
 }

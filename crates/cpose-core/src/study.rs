@@ -65,6 +65,7 @@ use thiserror::Error;
 
 use crate::checkpoint::{Reader, Writer};
 use crate::config::Config;
+use crate::plot::CURVES_HEADER;
 use crate::progress::Progress;
 use crate::provenance::process_cpu_secs;
 use crate::registry::TaskInput;
@@ -109,7 +110,7 @@ impl UnitKey {
     }
 
     /// `<condition>_<method>`, with `_s<seed>` when the study has several seeds; characters
-    /// other than ASCII letters, digits, `.`, `+` and `-` become `-`.
+    /// other than ASCII letters, digits, `.`, `+`, `-` and `_` become `-`.
     fn name(&self, with_seed: bool) -> String {
         let mut name = format!("{}_{}", clean(&self.condition), clean(&self.method));
         if with_seed {
@@ -119,11 +120,12 @@ impl UnitKey {
     }
 }
 
-/// `s` with every character but ASCII letters, digits, `.`, `+` and `-` replaced by `-`.
+/// `s` with every character but ASCII letters, digits, `.`, `+`, `-` and `_` replaced by `-`
+/// (no `=`, spaces or separators in file names).
 fn clean(s: &str) -> String {
     s.chars()
         .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '.' | '+' | '-') {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '+' | '-' | '_') {
                 c
             } else {
                 '-'
@@ -250,8 +252,14 @@ fn config_hash(config: &Config) -> String {
 /// resuming; [`Study::run`] calls it too).
 pub fn check_resume(dir: &Path, task: &str, config: &Config) -> Result<(), ResumeError> {
     let path = dir.join("study.json");
-    let text =
-        std::fs::read_to_string(&path).map_err(|_| ResumeError::NotAStudy(dir.to_owned()))?;
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        // Killed before its study began: nothing to keep, the study starts from the beginning.
+        // Results without a manifest are an older cpose's.
+        if dir.join("metrics.json").exists() {
+            return Err(ResumeError::NotAStudy(dir.to_owned()));
+        }
+        return Ok(());
+    };
     let manifest: Manifest = serde_json::from_str(&text).map_err(|e| ResumeError::Corrupt {
         path: path.clone(),
         message: format!("not a study manifest: {e}"),
@@ -420,7 +428,7 @@ impl<'a> Study<'a> {
 
     /// `metrics.json`: condition → method → metrics (seeds summarised, each kept under `runs`).
     fn metrics_json(&self, results: &Results) -> Value {
-        let mut grouped: BTreeMap<&str, BTreeMap<&str, Vec<(u64, &Metrics)>>> = BTreeMap::new();
+        let mut grouped: BTreeMap<&str, BTreeMap<&str, Vec<_>>> = BTreeMap::new();
         for (k, m) in results {
             grouped
                 .entry(&k.condition)
@@ -480,13 +488,14 @@ impl<'a> Study<'a> {
         let width = rows.iter().map(|(r, _)| r.len()).max().unwrap_or(0).max(4);
         let mut s = format!("results\n{:<width$}", "unit");
         for c in &columns {
-            let _ = write!(s, " {c:>14}");
+            let _ = write!(s, "  {c:>10}");
         }
         for (name, metrics) in &rows {
             let _ = write!(s, "\n{name:<width$}");
             for c in &columns {
                 let cell = metrics.get(c).map_or(String::new(), format_value);
-                let _ = write!(s, " {cell:>14}");
+                let w = c.len().max(10);
+                let _ = write!(s, "  {cell:>w$}");
             }
         }
         s
@@ -555,6 +564,7 @@ impl Shared<'_, '_> {
             earlier_wall_s: 0.0,
             earlier_cpu_s: 0.0,
             last_checkpoint: Instant::now(),
+            last_step: None,
             curves: Vec::new(),
             resumed: None,
         };
@@ -599,7 +609,7 @@ impl Shared<'_, '_> {
             .clone();
         let dir = self.input.run_dir;
         dir.write_json("metrics.json", &self.study.metrics_json(&results))?;
-        let mut csv = String::from(CURVES_HEADER);
+        let mut csv = format!("{CURVES_HEADER}\n");
         for key in self.study.units.iter() {
             let path = dir.file(
                 Path::new("units")
@@ -631,8 +641,6 @@ fn metrics_line(metrics: &Metrics, columns: &[String]) -> String {
     s
 }
 
-const CURVES_HEADER: &str = "condition,method,seed,step,wall_s,metric,value\n";
-
 /// `path` with `suffix` appended to its file name.
 fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
     let mut name = path.file_name().unwrap_or_default().to_os_string();
@@ -658,6 +666,8 @@ pub struct Unit<'a> {
     earlier_wall_s: f64,
     earlier_cpu_s: f64,
     last_checkpoint: Instant,
+    /// Steps completed at the newest checkpoint (written or resumed from).
+    last_step: Option<u64>,
     /// Curve rows not yet flushed to `units/<name>/curves.csv`.
     curves: Vec<String>,
     /// The step and the task's part of the checkpoint this unit resumes from.
@@ -734,6 +744,11 @@ impl Unit<'_> {
         self.log(line);
     }
 
+    /// Wall seconds the unit has run, over every session.
+    pub fn wall_secs(&self) -> f64 {
+        self.elapsed().0
+    }
+
     /// Whether a checkpoint is due: `[run] checkpoint_secs` have passed since the last one
     /// (or the unit's start).
     pub fn checkpoint_due(&self) -> bool {
@@ -741,8 +756,13 @@ impl Unit<'_> {
     }
 
     /// Saves the unit's state after `step` completed steps: `write` adds the task's values.
-    /// The previous checkpoint is kept as `checkpoint.bin.prev` until the new one is complete.
-    pub fn checkpoint(&mut self, step: u64, write: impl FnOnce(&mut Writer)) -> anyhow::Result<()> {
+    /// The previous checkpoint is kept as `checkpoint.bin.prev`; when `write` fails (say, on a
+    /// diverged state) nothing is written and its error returned.
+    pub fn checkpoint(
+        &mut self,
+        step: u64,
+        write: impl FnOnce(&mut Writer) -> anyhow::Result<()>,
+    ) -> anyhow::Result<()> {
         let (wall_s, cpu_s) = self.elapsed();
         let mut w = Writer::new();
         w.str(&self.hash);
@@ -750,7 +770,7 @@ impl Unit<'_> {
         w.u64(step);
         w.f64(wall_s);
         w.f64(cpu_s.unwrap_or(f64::NAN));
-        write(&mut w);
+        write(&mut w)?;
         self.flush_curves()?;
         let path = self.checkpoint_path();
         if path.is_file() {
@@ -760,7 +780,13 @@ impl Unit<'_> {
         }
         w.save(&path)?;
         self.last_checkpoint = Instant::now();
+        self.last_step = Some(step);
         Ok(())
+    }
+
+    /// The newest checkpoint of this unit and the steps it had completed, if there is one.
+    pub fn last_checkpoint(&self) -> Option<(PathBuf, u64)> {
+        self.last_step.map(|step| (self.checkpoint_path(), step))
     }
 
     /// After `cpose run --resume`: the number of steps the last checkpoint had completed and a
@@ -803,6 +829,12 @@ impl Unit<'_> {
             }
             match self.open_checkpoint(&candidate) {
                 Ok(found) => {
+                    self.last_step = Some(found.0);
+                    if candidate != path {
+                        // The damaged newest one is set aside; the older one takes its place.
+                        std::fs::rename(&candidate, &path)
+                            .with_context(|| format!("cannot restore {}", candidate.display()))?;
+                    }
                     self.resumed = Some(found);
                     return Ok(());
                 }
@@ -838,7 +870,7 @@ impl Unit<'_> {
     fn restore_curves(&mut self) -> anyhow::Result<()> {
         let path = self.run_dir.file(self.dir.join("curves.csv"));
         let upto = self.resumed.as_ref().map(|(s, _)| *s);
-        let mut kept = String::from(CURVES_HEADER);
+        let mut kept = format!("{CURVES_HEADER}\n");
         if let (Some(upto), Ok(text)) = (upto, std::fs::read_to_string(&path)) {
             for line in text.lines().skip(1) {
                 let step = line.split(',').nth(3).and_then(|s| s.parse::<u64>().ok());
@@ -867,5 +899,228 @@ impl Unit<'_> {
                 .with_context(|| format!("cannot append to {}", path.display()))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run_dir::RunDirOptions;
+    use crate::testing::TempDir;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    const CONFIG: &str = "task = \"demo\"\n[run]\ncheckpoint_secs = 0.0\n";
+
+    /// Runs the demo study in `dir`: a unit counts down from `10 · (seed + 1)` over 20 steps,
+    /// checkpointing every step; `fail_at` makes unit `hard_b` fail at that step (a kill).
+    fn demo(
+        dir: &Path,
+        resume: bool,
+        fail_at: Option<usize>,
+        calls: &AtomicUsize,
+    ) -> anyhow::Result<Results> {
+        let config = Config::from_text(dir.join("config.toml"), CONFIG);
+        let run = config.run_config()?;
+        let run_dir = RunDir::create(
+            "demo",
+            &RunDirOptions {
+                out: Some(dir.to_owned()),
+                allow_existing: true,
+                ..Default::default()
+            },
+        )?;
+        let input = TaskInput {
+            config: &config,
+            run_dir: &run_dir,
+            run: &run,
+            show_progress: false,
+            resume,
+        };
+        let units = UnitKey::grid(&["easy", "hard"], &["a", "b"], &[0, 1]);
+        Study::new(&input, units)
+            .report_every(5)
+            .columns(&["error"])
+            .run(|unit| {
+                calls.fetch_add(1, Ordering::Relaxed);
+                let steps = 20;
+                unit.set_steps(steps);
+                let (mut error, mut first) = (10.0 * (unit.key().seed + 1) as f64, 0);
+                if let Some((done, mut r)) = unit.resume() {
+                    error = r.f64()?;
+                    first = done as usize;
+                }
+                for step in first + 1..=steps {
+                    error *= 0.9;
+                    if unit.report_due(step) {
+                        unit.report(step, &[("error", error)]);
+                    }
+                    if fail_at == Some(step) && unit.name() == "hard_b_s1" {
+                        bail!("killed");
+                    }
+                    if unit.checkpoint_due() {
+                        unit.checkpoint(step as u64, |w| {
+                            w.f64(error);
+                            Ok(())
+                        })?;
+                    }
+                }
+                let file = unit.file("traj", "txt");
+                std::fs::write(file, format!("{error}"))?;
+                Ok(Metrics::new().with("error", error).with("steps", steps))
+            })
+    }
+
+    fn strip_timing(v: &mut Value) {
+        if let Value::Object(map) = v {
+            map.remove("wall_s");
+            map.remove("cpu_s");
+            map.values_mut().for_each(strip_timing);
+        }
+    }
+
+    fn metrics(dir: &Path) -> Value {
+        let mut v: Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap())
+                .unwrap();
+        strip_timing(&mut v);
+        v
+    }
+
+    #[test]
+    fn units_write_nested_metrics_curves_and_named_files() {
+        let dir = TempDir::new("study");
+        let calls = AtomicUsize::new(0);
+        let results = demo(&dir, false, None, &calls).unwrap();
+        assert_eq!(results.len(), 8);
+        assert_eq!(calls.load(Ordering::Relaxed), 8);
+        let m = metrics(&dir);
+        let e0 = 10.0 * 0.9f64.powi(20);
+        let hard_b = &m["hard"]["b"];
+        assert!(
+            (hard_b["error"].as_f64().unwrap() - 1.5 * e0).abs() < 1e-12,
+            "{m}"
+        );
+        assert_eq!(hard_b["seeds"], 2);
+        assert_eq!(hard_b["runs"]["1"]["steps"], 20);
+        assert!(dir.join("traj_easy_a_s0.txt").is_file());
+        let curves = std::fs::read_to_string(dir.join("curves.csv")).unwrap();
+        let mut lines = curves.lines();
+        assert_eq!(lines.next(), Some(CURVES_HEADER));
+        // Steps 1, 5, 10, 15, 20 for each of 8 units.
+        assert_eq!(lines.clone().count(), 40);
+        assert!(lines.any(|l| l.starts_with("hard,b,1,20,")), "{curves}");
+        // No checkpoint is left behind by finished units.
+        assert!(!dir.join("units/hard_b_s1/checkpoint.bin").exists());
+        let log = std::fs::read_to_string(dir.join("log.txt")).unwrap();
+        assert!(log.contains("easy_a_s0: step 5  error"), "{log}");
+        assert!(log.contains("hard / b"), "{log}");
+        // A finished run cannot be resumed.
+        let e = demo(&dir, true, None, &calls).unwrap_err();
+        assert!(
+            e.downcast_ref::<ResumeError>()
+                .is_some_and(|e| matches!(e, ResumeError::Finished(_))),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_killed_study_resumes_to_the_same_results_without_rerunning_finished_units() {
+        let whole = TempDir::new("study-whole");
+        let calls = AtomicUsize::new(0);
+        demo(&whole, false, None, &calls).unwrap();
+        let cut = TempDir::new("study-cut");
+        let e = demo(&cut, false, Some(13), &calls).unwrap_err();
+        assert!(format!("{e:#}").contains("unit hard_b_s1: killed"), "{e:#}");
+        // Damage the newest checkpoint: it is set aside and the one before is used.
+        let ckpt = cut.join("units/hard_b_s1/checkpoint.bin");
+        let mut bytes = std::fs::read(&ckpt).unwrap();
+        let last = bytes.len() - 1;
+        bytes[last] ^= 1;
+        std::fs::write(&ckpt, bytes).unwrap();
+        calls.store(0, Ordering::Relaxed);
+        demo(&cut, true, None, &calls).unwrap();
+        assert_eq!(
+            calls.load(Ordering::Relaxed),
+            1,
+            "only the unfinished unit runs"
+        );
+        assert_eq!(metrics(&cut), metrics(&whole));
+        for f in ["traj_hard_b_s1.txt", "curves.csv"] {
+            let strip = |d: &Path| -> Vec<String> {
+                let text = std::fs::read_to_string(d.join(f)).unwrap();
+                // curves.csv: all but the wall-clock column.
+                text.lines()
+                    .map(|l| {
+                        let mut c: Vec<&str> = l.split(',').collect();
+                        if c.len() == 7 {
+                            c.remove(4);
+                        }
+                        c.join(",")
+                    })
+                    .collect()
+            };
+            assert_eq!(strip(&cut), strip(&whole), "{f}");
+        }
+        assert!(cut.join("units/hard_b_s1/checkpoint.bin.corrupt").is_file());
+        let log = std::fs::read_to_string(cut.join("log.txt")).unwrap();
+        assert!(log.contains("checksum does not match"), "{log}");
+        assert!(log.contains("hard_b_s1: resumed after step 11"), "{log}");
+        assert!(
+            log.contains("easy_a_s0: finished before the resume"),
+            "{log}"
+        );
+    }
+
+    #[test]
+    fn resume_refuses_other_tasks_configs_and_non_studies() {
+        let dir = TempDir::new("study-refuse");
+        let config = Config::from_text("c.toml", CONFIG);
+        // Killed before the study began: it starts from the beginning.
+        check_resume(&dir, "demo", &config).unwrap();
+        std::fs::write(dir.join("metrics.json"), "{}").unwrap();
+        let e = check_resume(&dir, "demo", &config).unwrap_err();
+        assert!(e.to_string().contains("no study.json"), "{e}");
+        std::fs::write(dir.join("study.json"), "{").unwrap();
+        let e = check_resume(&dir, "demo", &config).unwrap_err();
+        assert!(e.to_string().contains("not a study manifest"), "{e}");
+        let manifest = Manifest {
+            task: "demo".into(),
+            config_hash: config_hash(&config),
+            units: Vec::new(),
+            finished: false,
+        };
+        std::fs::write(
+            dir.join("study.json"),
+            serde_json::to_string(&manifest).unwrap(),
+        )
+        .unwrap();
+        check_resume(&dir, "demo", &config).unwrap();
+        let e = check_resume(&dir, "slam", &config).unwrap_err();
+        assert!(
+            e.to_string().contains("holds a run of task \"demo\""),
+            "{e}"
+        );
+        let edited = Config::from_text("c.toml", format!("{CONFIG}seed = 1\n"));
+        let e = check_resume(&dir, "demo", &edited).unwrap_err();
+        assert!(e.to_string().contains("config.toml was changed"), "{e}");
+    }
+
+    #[test]
+    fn names_and_numbers_are_clean() {
+        let k = UnitKey::new("rm=60 tm/10", "lie_spline", 3);
+        assert_eq!(k.name(false), "rm-60-tm-10_lie_spline");
+        assert_eq!(k.name(true), "rm-60-tm-10_lie_spline_s3");
+        assert_eq!(format_value(&serde_json::json!(500)), "500");
+        assert_eq!(format_value(&serde_json::json!(0.012345)), "0.01235");
+        assert_eq!(format_value(&serde_json::json!(12.0)), "12");
+        assert_eq!(format_value(&serde_json::json!(1.5e-7)), "1.500e-7");
+        assert_eq!(format_value(&Value::Null), "-");
+        let m = mean_over_seeds(&[
+            &Metrics::new().with("e", 1.0).with("s", "x"),
+            &Metrics::new().with("e", 3.0).with("s", "y"),
+        ]);
+        assert_eq!(m.number("e"), Some(2.0));
+        assert_eq!(m.0.get("s"), None);
+        assert_eq!(m.number("seeds"), Some(2.0));
     }
 }

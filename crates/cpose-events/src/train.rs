@@ -488,15 +488,13 @@ impl<'a> EventTrainer<'a> {
         })
     }
 
-    /// The field's and the correction's parameters to `path` after `iterations` steps
-    /// ([`cpose_nerf::nerf::train::write_checkpoint`]).
+    /// The field's and the correction's parameters to `path` after `iterations` steps.
     pub fn save_checkpoint(&self, path: &std::path::Path, iterations: u64) -> anyhow::Result<()> {
-        cpose_nerf::nerf::train::write_checkpoint(
-            path,
-            iterations,
-            self.field.params(),
-            &self.poses.params(),
-        )
+        let mut w = cpose_core::checkpoint::Writer::new();
+        w.u64(iterations);
+        w.f32s(self.field.params());
+        w.f32s(&self.poses.params());
+        w.save(path)
     }
 }
 

@@ -13,7 +13,6 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::{Context, bail};
 use cpose_core::config::Config;
@@ -21,6 +20,7 @@ use cpose_core::eval::{self, Trajectory};
 use cpose_core::nn::{Adam, ExponentialDecay};
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
+use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
@@ -405,7 +405,6 @@ struct MethodMetrics {
     num_params: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     final_loss: Option<f64>,
-    wall_s: f64,
 }
 
 /// Mean and RMSE of the rotation (degrees) and translation (metres) errors: evo's APE
@@ -455,18 +454,32 @@ struct Fit<'a> {
     norm: &'a Normalisation,
     cfg: &'a FitConfig,
     known_targets: Vec<Isometry3<f64>>,
-    imu_order: Vec<usize>,
+    /// Held-out times and poses, for the live error.
+    held_times: &'a [f64],
+    held_truth: &'a [Isometry3<f64>],
 }
 
 impl Fit<'_> {
-    /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel`; returns the last loss.
+    /// Held-out rotation (degrees) and translation (metres) errors of `field` now.
+    fn held_out_errors(&self, field: &dyn PoseField) -> anyhow::Result<(f64, f64)> {
+        let mut out = PoseBatch::default();
+        field.evaluate(self.held_times, Order::Pose, &mut out)?;
+        let estimated: Vec<Isometry3<f64>> = (0..self.held_times.len())
+            .map(|i| self.norm.to_world_frame(&out.world_from_body(i)))
+            .collect();
+        let (rot, _, trans, _) = pose_errors(&estimated, self.held_truth)?;
+        Ok((rot, trans))
+    }
+
+    /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel`, reporting the loss and the held-out
+    /// errors and checkpointing through `unit`; returns the last loss.
     fn run(
         &self,
         field: &mut dyn PoseField,
         mode: ImuMode,
         iterations: usize,
         seed: u64,
-        mut tick: impl FnMut(),
+        unit: &mut Unit,
     ) -> anyhow::Result<f64> {
         let mut adam = Adam::<f32>::new(field.num_params());
         let mut grad = vec![0.0f32; field.num_params()];
@@ -477,10 +490,29 @@ impl Fit<'_> {
             Vec::with_capacity(batch),
             Vec::with_capacity(batch),
         );
-        let mut imu_order = self.imu_order.clone();
+        let mut imu_order: Vec<usize> = (0..self.seq.imu.len()).collect();
         let mut pairs = Vec::with_capacity(batch);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut cursor = imu_order.len();
+        let mut first = 0;
+        let mut loss = f64::NAN;
+        unit.set_steps(iterations);
+        if let Some((done, mut r)) = unit.resume() {
+            r.pose_field(field)?;
+            r.adam(&mut adam)?;
+            rng = r.rng()?;
+            let order = r.f64s()?;
+            if order.len() != imu_order.len() {
+                bail!(
+                    "{}: the checkpoint's IMU order does not match",
+                    r.path().display()
+                );
+            }
+            imu_order = order.into_iter().map(|i| i as usize).collect();
+            cursor = r.u64()? as usize;
+            loss = r.f64()?;
+            first = done as usize;
+        }
         let decay = |lr: f64| ExponentialDecay {
             lr0: lr,
             lr_end: lr * self.cfg.lr_decay,
@@ -492,8 +524,7 @@ impl Fit<'_> {
             decay(self.cfg.lr_pose),
         );
         let g = self.norm.gravity();
-        let mut loss = f64::NAN;
-        for it in 0..iterations {
+        for it in first..iterations {
             grad.fill(0.0);
             let n = self.seq.known_times.len();
             field.forward(&self.seq.known_times, Order::Pose, &mut out)?;
@@ -565,7 +596,8 @@ impl Fit<'_> {
             }
             if !loss.is_finite() || grad.iter().any(|x| !x.is_finite()) {
                 bail!(
-                    "the loss or its gradient became {loss} at iteration {it}; stopping this fit"
+                    "the loss or its gradient became {loss} at iteration {it}; stopping this fit \
+                     (the last good checkpoint is kept)"
                 );
             }
             let step = it as u64;
@@ -574,11 +606,32 @@ impl Fit<'_> {
                 ParamKind::Rotation => lr_r.lr(step),
                 ParamKind::Pose => lr_p.lr(step),
             });
-            tick();
+            let done = it + 1;
+            if unit.report_due(done) {
+                let (rot, trans) = self.held_out_errors(field)?;
+                unit.report(
+                    done,
+                    &[("loss", loss), ("rot_err_deg", rot), ("trans_err_m", trans)],
+                );
+            }
+            if done < iterations && unit.checkpoint_due() {
+                unit.checkpoint(done as u64, |w| {
+                    w.pose_field(field);
+                    w.adam(&adam);
+                    w.rng(&rng);
+                    w.f64s(&imu_order.iter().map(|&i| i as f64).collect::<Vec<_>>());
+                    w.u64(cursor as u64);
+                    w.f64(loss);
+                    Ok(())
+                })?;
+            }
         }
         Ok(loss)
     }
 }
+
+/// The method key of the interpolation reference.
+const INTERP: &str = "interp";
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let config = input.config;
@@ -608,6 +661,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             config.path().display()
         );
     }
+    if exp.fields.contains_key(INTERP) {
+        bail!(
+            "{}: [fields.{INTERP}] is the name of the interpolation reference; call the field otherwise",
+            config.path().display()
+        );
+    }
     let known_poses: Vec<Isometry3<f64>> = seq.known.iter().map(|&i| seq.poses[i]).collect();
     let norm = Normalisation::fit(&known_poses);
     let held_out = seq.held_out();
@@ -626,44 +685,22 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         norm.scale
     ));
 
-    let write_trajectory =
-        |name: &str, times: &[f64], poses: Vec<Isometry3<f64>>| -> anyhow::Result<()> {
-            let absolute = times.iter().map(|t| t + seq.origin_secs).collect();
-            let trajectory = Trajectory::new(absolute, poses)?;
-            eval::write_tum(input.run_dir.path().join(name), &trajectory)?;
-            Ok(())
-        };
-    write_trajectory("gt.txt", &seq.times, seq.poses.clone())?;
-    let known_times = &seq.known_times;
-    write_trajectory("known.txt", known_times, known_poses.clone())?;
-
-    let mut metrics: BTreeMap<&str, BTreeMap<String, MethodMetrics>> = BTreeMap::new();
-    // Reference: interpolation of the known poses.
-    let started = Instant::now();
-    let interp: Vec<Isometry3<f64>> = held_times.iter().map(|&t| interpolate(&seq, t).0).collect();
-    let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) = pose_errors(&interp, &held_truth)?;
-    let ang_vel = rms(seq
-        .imu
-        .iter()
-        .map(|s| (interpolate(&seq, s.t_secs).1 - s.gyro).norm()));
-    metrics.entry(ImuMode::None.key()).or_default().insert(
-        "interp".into(),
-        MethodMetrics {
-            rot_err_deg,
-            rot_rmse_deg,
-            trans_err_m,
-            trans_rmse_m,
-            ang_vel_rmse_rad_s: ang_vel,
-            held_out_poses: held_out.len(),
-            num_params: None,
-            final_loss: None,
-            wall_s: started.elapsed().as_secs_f64(),
-        },
-    );
+    let write_trajectory = |path: PathBuf, times: &[f64], poses: Vec<Isometry3<f64>>| {
+        let absolute = times.iter().map(|t| t + seq.origin_secs).collect();
+        let trajectory = Trajectory::new(absolute, poses)?;
+        eval::write_tum(path, &trajectory)?;
+        anyhow::Ok(())
+    };
     write_trajectory(
-        "est_interp.txt",
+        input.run_dir.file("traj_gt.txt"),
         &seq.times,
-        seq.times.iter().map(|&t| interpolate(&seq, t).0).collect(),
+        seq.poses.clone(),
+    )?;
+    let known_times = &seq.known_times;
+    write_trajectory(
+        input.run_dir.file("traj_known.txt"),
+        known_times,
+        known_poses.clone(),
     )?;
 
     let fit = Fit {
@@ -671,95 +708,85 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         norm: &norm,
         cfg: &exp.fit,
         known_targets: known_poses.iter().map(|p| norm.to_field_frame(p)).collect(),
-        imu_order: (0..seq.imu.len()).collect(),
+        held_times: &held_times,
+        held_truth: &held_truth,
     };
     let iterations = input.run.iterations(exp.fit.iterations);
     let mut modes = exp.fit.imu.clone();
     modes.dedup();
-    let progress = input.progress(
-        (iterations * modes.len() * exp.fields.len()) as u64,
-        "fitting",
-    );
+    // Units: the interpolation reference once (it uses no IMU), then every field per IMU mode.
+    let mut units = vec![UnitKey::new(ImuMode::None.key(), INTERP, seed)];
+    for &mode in &modes {
+        for name in exp.fields.keys() {
+            units.push(UnitKey::new(mode.key(), name.as_str(), seed));
+        }
+    }
     let ctx = FieldContext {
         time_range: seq.range(),
         frame_times_secs: known_times.clone(),
         seed,
     };
-    for &mode in &modes {
-        for name in exp.fields.keys() {
-            let section = config.section(&format!("fields.{name}"));
-            let mut field = build_pose_field(&section, &ctx)?;
-            let started = Instant::now();
-            let final_loss = fit
-                .run(field.as_mut(), mode, iterations, seed, || progress.inc(1))
-                .with_context(|| format!("fitting [fields.{name}] with imu = {:?}", mode.key()))?;
-            let wall_s = started.elapsed().as_secs_f64();
-            let mut out = PoseBatch::default();
-            field.evaluate(&seq.times, Order::Pose, &mut out)?;
-            let all: Vec<Isometry3<f64>> = (0..seq.times.len())
-                .map(|i| norm.to_world_frame(&out.world_from_body(i)))
-                .collect();
+    Study::new(input, units)
+        .columns(&[
+            "rot_err_deg",
+            "trans_err_m",
+            "ang_vel_rmse_rad_s",
+            "final_loss",
+        ])
+        .report_every(100)
+        .run(|unit| {
+            let (mode_key, name) = (unit.key().condition.clone(), unit.key().method.clone());
+            let (all, num_params, final_loss, ang_vel_rmse_rad_s) = if name == INTERP {
+                let all: Vec<Isometry3<f64>> =
+                    seq.times.iter().map(|&t| interpolate(&seq, t).0).collect();
+                let ang_vel = rms(seq
+                    .imu
+                    .iter()
+                    .map(|s| (interpolate(&seq, s.t_secs).1 - s.gyro).norm()));
+                (all, None, None, ang_vel)
+            } else {
+                let mode = *modes
+                    .iter()
+                    .find(|m| m.key() == mode_key)
+                    .context("an IMU mode of the config")?;
+                let section = config.section(&format!("fields.{name}"));
+                let mut field = build_pose_field(&section, &ctx)?;
+                let final_loss = fit
+                    .run(field.as_mut(), mode, iterations, seed, unit)
+                    .with_context(|| format!("fitting [fields.{name}] with imu = {mode_key:?}"))?;
+                let mut out = PoseBatch::default();
+                field.evaluate(&seq.times, Order::Pose, &mut out)?;
+                let all: Vec<Isometry3<f64>> = (0..seq.times.len())
+                    .map(|i| norm.to_world_frame(&out.world_from_body(i)))
+                    .collect();
+                let ang_vel = if imu_times.is_empty() {
+                    None
+                } else {
+                    field.evaluate(&imu_times, Order::Velocity, &mut out)?;
+                    rms(seq
+                        .imu
+                        .iter()
+                        .enumerate()
+                        .map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
+                };
+                (all, Some(field.num_params()), Some(final_loss), ang_vel)
+            };
             let estimated: Vec<Isometry3<f64>> = held_out.iter().map(|&i| all[i]).collect();
             let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) =
                 pose_errors(&estimated, &held_truth)?;
-            let ang_vel_rmse_rad_s = if imu_times.is_empty() {
-                None
-            } else {
-                field.evaluate(&imu_times, Order::Velocity, &mut out)?;
-                rms(seq
-                    .imu
-                    .iter()
-                    .enumerate()
-                    .map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
-            };
-            write_trajectory(&format!("est_{}_{name}.txt", mode.key()), &seq.times, all)?;
-            input.run_dir.log(format_args!(
-                "imu={:<8} {name:<12} rot {rot_err_deg:8.4}° trans {:8.3} cm  ω-rmse {}  loss {final_loss:.3e}  {wall_s:.1} s",
-                mode.key(),
-                trans_err_m * 100.0,
-                ang_vel_rmse_rad_s.map_or("-".into(), |w| format!("{w:.4} rad/s")),
-            ));
-            metrics.entry(mode.key()).or_default().insert(
-                name.clone(),
-                MethodMetrics {
-                    rot_err_deg,
-                    rot_rmse_deg,
-                    trans_err_m,
-                    trans_rmse_m,
-                    ang_vel_rmse_rad_s,
-                    held_out_poses: held_out.len(),
-                    num_params: Some(field.num_params()),
-                    final_loss: Some(final_loss),
-                    wall_s,
-                },
-            );
-        }
-    }
-    progress.finish();
-    input.run_dir.write_json("metrics.json", &metrics)?;
-    input.run_dir.log(summary_table(&metrics));
+            write_trajectory(unit.file("traj", "txt"), &seq.times, all)?;
+            Metrics::from_serialize(&MethodMetrics {
+                rot_err_deg,
+                rot_rmse_deg,
+                trans_err_m,
+                trans_rmse_m,
+                ang_vel_rmse_rad_s,
+                held_out_poses: held_out.len(),
+                num_params,
+                final_loss,
+            })
+        })?;
     Ok(())
-}
-
-/// The held-out errors as a text table, one row per (IMU mode, method).
-fn summary_table(metrics: &BTreeMap<&str, BTreeMap<String, MethodMetrics>>) -> String {
-    let mut s = format!(
-        "\n{:<10} {:<12} {:>12} {:>12} {:>14}\n",
-        "imu", "method", "rot [deg]", "trans [cm]", "ω rmse [rad/s]"
-    );
-    for (mode, methods) in metrics {
-        for (name, m) in methods {
-            let w = m
-                .ang_vel_rmse_rad_s
-                .map_or("-".to_owned(), |w| format!("{w:.4}"));
-            s.push_str(&format!(
-                "{mode:<10} {name:<12} {:>12.4} {:>12.3} {w:>14}\n",
-                m.rot_err_deg,
-                m.trans_err_m * 100.0
-            ));
-        }
-    }
-    s
 }
 
 #[cfg(test)]

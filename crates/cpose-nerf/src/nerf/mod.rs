@@ -51,13 +51,13 @@ pub mod poses;
 pub mod train;
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
+use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{FieldContext, PoseField, PoseNetConfig, TimeRange};
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
@@ -242,10 +242,6 @@ struct TrainConfig {
     field_restart_until: f64,
     /// Spline: frames per control pose.
     spline_frames_per_control: f64,
-    /// Checkpoint every this many steps (0: never).
-    checkpoint_every: usize,
-    /// Log the mean loss and the pose errors every this many steps (0: never).
-    log_every: usize,
 }
 
 impl Default for TrainConfig {
@@ -266,8 +262,6 @@ impl Default for TrainConfig {
             field_restart_every: 0,
             field_restart_until: 1.0,
             spline_frames_per_control: 5.0,
-            checkpoint_every: 1000,
-            log_every: 500,
         }
     }
 }
@@ -584,7 +578,6 @@ struct MethodResult {
     /// Mean squared error of the last 100 training steps.
     final_loss: f64,
     iterations: usize,
-    wall_s: f64,
 }
 
 fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
@@ -721,121 +714,85 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             ));
         }
     }
-    write_trajectory(input, "traj_gt.txt", &views.train_times, &views.train_truth)?;
-    write_trajectory(input, "traj_init.txt", &views.train_times, &initial)?;
+    let file = |name: &str| input.run_dir.file(name);
+    write_trajectory(file("traj_gt.txt"), &views.train_times, &views.train_truth)?;
+    write_trajectory(file("traj_init.txt"), &views.train_times, &initial)?;
 
-    let mut results = BTreeMap::new();
-    for &method in &train.methods {
-        let started = Instant::now();
-        let mut field = field_config.init::<f32>(views.bounds)?;
-        let init = if method == Method::TruePoses {
-            views.train_truth.clone()
-        } else {
-            initial.clone()
-        };
-        let schedules = PoseSchedules {
-            rotation: decay(train.posenet_lr_rotation, iterations),
-            translation: decay(train.posenet_lr_translation, iterations),
-            pose: decay(train.lr_pose, iterations),
-            warmup: steps(train.pose_warmup),
-            rotation_warmup: steps(train.rotation_warmup.unwrap_or(train.pose_warmup)),
-        };
-        let mut poses = FramePoses::new(
-            init,
-            views.train_times.clone(),
-            correction(method, input, &views, train, seed)?,
-            schedules,
-        );
-        let schedule = Schedule {
-            iterations: iterations as u64,
-            rays_per_step: train.rays_per_step,
-            field_lr: train.lr_field.clone(),
-            seed,
-            field_restart_every: if poses.is_trainable() {
-                train.field_restart_every as u64
+    let units = train
+        .methods
+        .iter()
+        .map(|m| UnitKey::new(views.condition.as_str(), m.key(), seed))
+        .collect();
+    Study::new(input, units)
+        .report_every(500)
+        .columns(&[
+            "rot_err_deg",
+            "rot_err_relative_deg",
+            "trans_err",
+            "psnr_db",
+            "ssim",
+            "psnr_db_refined",
+        ])
+        .run(|unit| {
+            let method = *train
+                .methods
+                .iter()
+                .find(|m| m.key() == unit.key().method)
+                .context("a method of the config")?;
+            let mut field = field_config.init::<f32>(views.bounds)?;
+            let init = if method == Method::TruePoses {
+                views.train_truth.clone()
             } else {
-                0
-            },
-            field_restart_until: steps(train.field_restart_until),
-        };
-        let progress = input.progress(iterations as u64, method.key());
-        let checkpoint = input
-            .run_dir
-            .file(format!("checkpoint_{}.bin", method.key()));
-        // The last 100 losses, a ring.
-        let mut recent = [0.0f64; 100];
-        {
-            let mut trainer = Trainer::new(
-                field.as_mut(),
-                &mut poses,
-                &views.train_images,
-                views.camera,
-                views.settings,
-                schedule,
-            )?;
-            train_steps(
-                &mut trainer,
-                method,
-                iterations,
-                train.checkpoint_every,
-                &checkpoint,
-                |it, loss, trainer| {
-                    recent[it % recent.len()] = loss;
-                    progress.inc(1);
-                    if train.log_every > 0 && (it + 1) % train.log_every == 0 {
-                        let n = (it + 1).min(recent.len());
-                        let loss = recent.iter().take(n).sum::<f64>() / n as f64;
-                        let errors = barf_pose_errors(
-                            &views.train_truth,
-                            trainer.poses().current(),
-                            ReflectionFix::Kabsch,
-                        )?;
-                        input.run_dir.log(format_args!(
-                            "{} {}/{iterations}: loss {loss:.5} (training PSNR {:.2} dB), rotation {:.3}°, translation {:.4}",
-                            method.key(),
-                            it + 1,
-                            -10.0 * loss.log10(),
-                            errors.rot_err_deg,
-                            errors.trans_err,
-                        ));
-                    }
-                    Ok(())
+                initial.clone()
+            };
+            let schedules = PoseSchedules {
+                rotation: decay(train.posenet_lr_rotation, iterations),
+                translation: decay(train.posenet_lr_translation, iterations),
+                pose: decay(train.lr_pose, iterations),
+                warmup: steps(train.pose_warmup),
+                rotation_warmup: steps(train.rotation_warmup.unwrap_or(train.pose_warmup)),
+            };
+            let mut poses = FramePoses::new(
+                init,
+                views.train_times.clone(),
+                correction(method, input, &views, train, seed)?,
+                schedules,
+            );
+            let schedule = Schedule {
+                iterations: iterations as u64,
+                rays_per_step: train.rays_per_step,
+                field_lr: train.lr_field.clone(),
+                seed,
+                field_restart_every: if poses.is_trainable() {
+                    train.field_restart_every as u64
+                } else {
+                    0
                 },
+                field_restart_until: steps(train.field_restart_until),
+            };
+            let final_loss = {
+                let mut trainer = Trainer::new(
+                    field.as_mut(),
+                    &mut poses,
+                    &views.train_images,
+                    views.camera,
+                    views.settings,
+                    schedule,
+                )?;
+                train_steps(&mut trainer, unit, method, iterations, &views.train_truth)?
+            };
+            let result = evaluate(
+                unit,
+                &exp,
+                &views,
+                field.as_mut(),
+                &poses,
+                final_loss,
+                iterations,
+                seed,
             )?;
-        }
-        progress.finish();
-        let wall_s = started.elapsed().as_secs_f64();
-        let result = evaluate(
-            input,
-            &exp,
-            &views,
-            method,
-            field.as_mut(),
-            &poses,
-            recent[..iterations.min(recent.len())].iter().sum::<f64>()
-                / iterations.clamp(1, recent.len()) as f64,
-            iterations,
-            wall_s,
-            seed,
-        )?;
-        input.run_dir.log(format_args!(
-            "{}: rotation {:.3}° ({:.3}° relative), translation {:.4}, PSNR {:.2} dB (refined {}), SSIM {:.3}, {:.0} s",
-            method.key(),
-            result.rot_err_deg,
-            result.rot_err_relative_deg,
-            result.trans_err,
-            result.psnr_db,
-            result
-                .psnr_db_refined
-                .map_or("-".to_owned(), |p| format!("{p:.2} dB")),
-            result.ssim,
-            result.wall_s
-        ));
-        results.insert(method.key(), result);
-        // Write as we go so a long sweep keeps what is done.
-        let metrics = BTreeMap::from([(views.condition.clone(), &results)]);
-        input.run_dir.write_json("metrics.json", &metrics)?;
-    }
+            Metrics::from_serialize(&result)
+        })?;
     Ok(())
 }
 
@@ -862,79 +819,104 @@ fn centre_leaves_view(
         .count()
 }
 
-/// Steps `trainer` through iterations `0..iterations`, passing each loss to `on_loss`, and
-/// writes `checkpoint` after every `checkpoint_every` steps (0: never). A failed step or
-/// checkpoint ends the run with one error naming the method and the last good checkpoint (a
-/// diverged state never overwrites it, see [`Trainer::save_checkpoint`]) or saying there is none.
+/// Losses kept for the reported (and final) loss: the mean of the latest ones.
+const RECENT: usize = 100;
+
+/// Steps `trainer` to `iterations` (from the unit's checkpoint after a resume), reporting the
+/// mean loss of the latest [`RECENT`] steps and the pose errors against `truth`, and saving
+/// the whole training state when a checkpoint is due; returns the final mean loss. A failed
+/// step or checkpoint ends the run with one error naming the method and the last good
+/// checkpoint (a diverged state never overwrites it, see [`Trainer::save_state`]) or saying
+/// there is none.
 fn train_steps(
     trainer: &mut Trainer<'_>,
+    unit: &mut Unit,
     method: Method,
     iterations: usize,
-    checkpoint_every: usize,
-    checkpoint: &Path,
-    mut on_loss: impl FnMut(usize, f64, &Trainer<'_>) -> anyhow::Result<()>,
-) -> anyhow::Result<()> {
-    let stopped = |trainer: &Trainer<'_>| {
-        let last = match trainer.last_checkpoint() {
+    truth: &[Isometry3<f64>],
+) -> anyhow::Result<f64> {
+    let mut recent = [0.0f64; RECENT];
+    let mut first = 0;
+    unit.set_steps(iterations);
+    if let Some((done, mut r)) = unit.resume() {
+        trainer.load_state(&mut r, done)?;
+        let saved = r.f64s()?;
+        if saved.len() != RECENT {
+            bail!("{}: corrupt loss history", r.path().display());
+        }
+        recent.copy_from_slice(&saved);
+        first = done as usize;
+    }
+    let stopped = |unit: &Unit| {
+        let last = match unit.last_checkpoint() {
             Some((path, steps)) => {
                 format!(
                     "last good checkpoint: {}, after {steps} steps",
                     path.display()
                 )
             }
-            None if checkpoint_every == 0 => "checkpoints are off".to_owned(),
-            None => format!("no checkpoint yet, one every {checkpoint_every} steps"),
+            None => "no checkpoint yet".to_owned(),
         };
         format!("method {}: training stopped ({last})", method.key())
     };
-    for it in 0..iterations {
-        let loss = trainer.step(it as u64).with_context(|| stopped(trainer))?;
-        on_loss(it, loss, trainer)?;
-        if checkpoint_every > 0 && (it + 1) % checkpoint_every == 0 {
-            trainer
-                .save_checkpoint(checkpoint, it as u64 + 1)
-                .with_context(|| stopped(trainer))?;
+    let mean = |recent: &[f64; RECENT], done: usize| {
+        let n = done.clamp(1, RECENT);
+        recent[..n].iter().sum::<f64>() / n as f64
+    };
+    for it in first..iterations {
+        let loss = trainer.step(it as u64).with_context(|| stopped(unit))?;
+        recent[it % RECENT] = loss;
+        let done = it + 1;
+        if unit.report_due(done) {
+            let loss = mean(&recent, done);
+            let errors = barf_pose_errors(truth, trainer.poses().current(), ReflectionFix::Kabsch)?;
+            unit.report(
+                done,
+                &[
+                    ("loss", loss),
+                    ("psnr_train_db", -10.0 * loss.log10()),
+                    ("rot_err_deg", errors.rot_err_deg),
+                    ("trans_err", errors.trans_err),
+                ],
+            );
+        }
+        if done < iterations && unit.checkpoint_due() {
+            let saved = unit.checkpoint(done as u64, |w| {
+                trainer.save_state(w)?;
+                w.f64s(&recent);
+                Ok(())
+            });
+            saved.with_context(|| stopped(unit))?;
         }
     }
-    Ok(())
+    Ok(mean(&recent, iterations))
 }
 
-fn write_trajectory(
-    input: &TaskInput,
-    name: &str,
-    times: &[f64],
-    poses: &[Isometry3<f64>],
-) -> anyhow::Result<()> {
+fn write_trajectory(path: PathBuf, times: &[f64], poses: &[Isometry3<f64>]) -> anyhow::Result<()> {
     let trajectory = Trajectory::new(times.to_vec(), poses.to_vec())?;
-    write_tum(input.run_dir.file(name), &trajectory)?;
+    write_tum(path, &trajectory)?;
     Ok(())
 }
 
 fn evaluate(
-    input: &TaskInput,
+    unit: &Unit,
     exp: &Experiment,
     views: &Views,
-    method: Method,
     field: &mut dyn RadianceField,
     poses: &FramePoses,
     final_loss: f64,
     iterations: usize,
-    wall_s: f64,
     seed: u64,
 ) -> anyhow::Result<MethodResult> {
     let estimate = poses.current();
     let errors = barf_pose_errors(&views.train_truth, estimate, ReflectionFix::Kabsch)?;
     let barf_fix = if errors.alignment.reflected {
         let barf = barf_pose_errors(&views.train_truth, estimate, ReflectionFix::BarfThirdRow)?;
-        input.run_dir.log(format_args!(
-            "{}: the camera centres align best through a reflection (near-planar centres); with \
+        unit.log(format_args!(
+            "the camera centres align best through a reflection (near-planar centres); with \
              Kabsch's fix rotation {:.3}°, translation {:.4}; with BARF's third-row fix {:.3}°, \
              {:.4}",
-            method.key(),
-            errors.rot_err_deg,
-            errors.trans_err,
-            barf.rot_err_deg,
-            barf.trans_err,
+            errors.rot_err_deg, errors.trans_err, barf.rot_err_deg, barf.trans_err,
         ));
         Some(barf)
     } else {
@@ -954,17 +936,9 @@ fn evaluate(
             .collect(),
         None => Vec::new(),
     };
-    write_trajectory(
-        input,
-        &format!("traj_{}.txt", method.key()),
-        &views.train_times,
-        &aligned,
-    )?;
-    eval::trajectory_plot(480, &views.train_truth, &init_aligned, &aligned).save_png(
-        input
-            .run_dir
-            .file(format!("trajectory_{}.png", method.key())),
-    )?;
+    write_trajectory(unit.file("traj", "txt"), &views.train_times, &aligned)?;
+    eval::trajectory_plot(480, &views.train_truth, &init_aligned, &aligned)
+        .save_png(unit.file("trajectory", "png"))?;
 
     let mut renderer = Renderer::default();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7e57);
@@ -993,7 +967,7 @@ fn evaluate(
         if k < exp.eval.saved_views {
             view.image
                 .beside(image)
-                .save_png(input.run_dir.file(format!("view_{k}_{}.png", method.key())))?;
+                .save_png(unit.file(&format!("view{k}"), "png"))?;
             depth_image(
                 views.camera.width,
                 views.camera.height,
@@ -1002,11 +976,7 @@ fn evaluate(
                 near,
                 far,
             )
-            .save_png(
-                input
-                    .run_dir
-                    .file(format!("depth_{k}_{}.png", method.key())),
-            )?;
+            .save_png(unit.file(&format!("depth{k}"), "png"))?;
         }
         if refinement.iterations > 0 {
             let refined = eval::refine_pose(
@@ -1048,7 +1018,6 @@ fn evaluate(
         ssim_refined: refined.then_some(ssim_ref / n),
         final_loss,
         iterations,
-        wall_s,
     })
 }
 
@@ -1101,35 +1070,53 @@ mod tests {
         }
     }
 
-    /// Runs 8 steps with a checkpoint every `every`, the field turning NaN at step `poison_at`;
-    /// returns the error message and the checkpoint file's content, if any.
-    fn diverging_run(every: usize, poison_at: usize) -> (String, Option<Vec<u8>>) {
-        let dir = cpose_core::testing::TempDir::new(&format!("nerf-diverge-{every}-{poison_at}"));
-        let checkpoint = dir.join("checkpoint_barf.bin");
-        let mut tiny = Tiny::new();
-        let inner = tiny.field;
-        tiny.field = Box::new(NanFrom {
-            inner,
-            poison_at,
-            steps: 0,
-        });
-        let mut trainer = tiny.trainer(8);
-        let mut losses = Vec::new();
-        let err = train_steps(
-            &mut trainer,
-            Method::Barf,
-            8,
-            every,
-            &checkpoint,
-            |it, loss, _| {
-                losses.push((it, loss));
-                Ok(())
-            },
-        )
-        .unwrap_err();
-        assert_eq!(losses.len(), poison_at, "{losses:?}");
+    /// Runs 8 steps as one unit of a study in a temporary folder, checkpointing after every
+    /// step when `checkpoints` (else never), the field turning NaN at step `poison_at`; returns
+    /// the error message (the folder written as `DIR`) and the checkpoint's steps, if any.
+    fn diverging_run(checkpoints: bool, poison_at: usize) -> (String, Option<u64>) {
+        use cpose_core::run_dir::{RunDir, RunDirOptions};
+        let dir =
+            cpose_core::testing::TempDir::new(&format!("nerf-diverge-{checkpoints}-{poison_at}"));
+        let secs = if checkpoints { 0.0 } else { 1e9 };
+        let config = cpose_core::Config::from_text(
+            "x.toml",
+            format!("task = \"nerf\"\n[run]\ncheckpoint_secs = {secs}\n"),
+        );
+        let run = config.run_config().unwrap();
+        let options = RunDirOptions {
+            out: Some(dir.to_path_buf()),
+            ..Default::default()
+        };
+        let run_dir = RunDir::create("nerf", &options).unwrap();
+        let input = TaskInput {
+            config: &config,
+            run_dir: &run_dir,
+            run: &run,
+            show_progress: false,
+            resume: false,
+        };
+        let losses = std::sync::atomic::AtomicU64::new(0);
+        let err = Study::new(&input, vec![UnitKey::new("tiny", "barf", 0)])
+            .run(|unit| {
+                let mut tiny = Tiny::new();
+                let inner = tiny.field;
+                tiny.field = Box::new(NanFrom {
+                    inner,
+                    poison_at,
+                    steps: 0,
+                });
+                let truth = tiny.poses.initial().to_vec();
+                let mut trainer = tiny.trainer(8);
+                let result = train_steps(&mut trainer, unit, Method::Barf, 8, &truth);
+                let steps = unit.last_checkpoint().map_or(0, |(_, s)| s);
+                losses.store(steps, std::sync::atomic::Ordering::Relaxed);
+                result.map(|_| Metrics::new())
+            })
+            .unwrap_err();
         let message = format!("{err:#}").replace(&dir.display().to_string(), "DIR");
-        let saved = std::fs::read(&checkpoint).ok();
+        let saved = std::fs::read(dir.join("units/tiny_barf/checkpoint.bin"))
+            .ok()
+            .map(|_| losses.load(std::sync::atomic::Ordering::Relaxed));
         (message, saved)
     }
 
@@ -1154,34 +1141,20 @@ mod tests {
     /// names the method, the iteration and the checkpoint that is still good.
     #[test]
     fn a_nan_loss_ends_training_with_one_line_naming_the_last_good_checkpoint() {
-        let (message, saved) = diverging_run(2, 5);
+        let (message, saved) = diverging_run(true, 5);
         assert_eq!(
             message,
-            "method barf: training stopped (last good checkpoint: DIR/checkpoint_barf.bin, \
-             after 4 steps): the loss is NaN at iteration 5"
+            "unit tiny_barf: method barf: training stopped (last good checkpoint: \
+             DIR/units/tiny_barf/checkpoint.bin, after 5 steps): the loss is NaN at iteration 5"
         );
-        // The checkpoint of step 4, finite: written before the field diverged.
-        let saved = saved.expect("a checkpoint after 2 and 4 steps");
-        let header_end = saved.iter().position(|&b| b == b'\n').unwrap();
-        let header = std::str::from_utf8(&saved[..header_end]).unwrap();
-        assert!(
-            header.starts_with("cpose-nerf checkpoint v1 4 "),
-            "{header}"
-        );
-        assert!(
-            saved[header_end + 1..]
-                .chunks_exact(4)
-                .all(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]).is_finite())
-        );
-
-        let (message, saved) = diverging_run(4, 3);
+        // The checkpoint of step 5, written before the field diverged, is kept.
+        assert_eq!(saved, Some(5));
+        let (message, saved) = diverging_run(false, 3);
         assert_eq!(
             message,
-            "method barf: training stopped (no checkpoint yet, one every 4 steps): the loss is \
-             NaN at iteration 3"
+            "unit tiny_barf: method barf: training stopped (no checkpoint yet): the loss is NaN \
+             at iteration 3"
         );
         assert_eq!(saved, None);
-        let (message, _) = diverging_run(0, 1);
-        assert!(message.contains("(checkpoints are off)"), "{message}");
     }
 }

@@ -166,7 +166,24 @@ impl FramePoses {
         Ok(())
     }
 
-    /// The correction's parameters, flat (for checkpoints).
+    /// Writes the correction and its optimiser (nothing without a correction).
+    pub fn save_state(&self, w: &mut cpose_core::checkpoint::Writer) {
+        if let Some(c) = &self.correction {
+            w.pose_field(c.as_ref());
+            w.adam(&self.adam);
+        }
+    }
+
+    /// Restores [`FramePoses::save_state`] into poses built with the same config.
+    pub fn load_state(&mut self, r: &mut cpose_core::checkpoint::Reader) -> anyhow::Result<()> {
+        if let Some(c) = self.correction.as_mut() {
+            r.pose_field(c.as_mut())?;
+            r.adam(&mut self.adam)?;
+        }
+        Ok(())
+    }
+
+    /// The correction's parameters, flat.
     pub fn params(&self) -> Vec<f32> {
         self.correction
             .as_deref()

@@ -15,9 +15,9 @@
 //! from one round to the next.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use anyhow::bail;
+use cpose_core::checkpoint::{Reader, Writer};
 use cpose_core::nn::{Adam, ExponentialDecay};
 use nalgebra::{Quaternion, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -77,8 +77,6 @@ pub struct Trainer<'a> {
     rng: ChaCha8Rng,
     /// A permutation of the pixel indices `0..w·h`, the state of [`draw_distinct`].
     pixels: Vec<usize>,
-    /// The last checkpoint written by [`Trainer::save_checkpoint`] and its step count.
-    last_checkpoint: Option<(PathBuf, u64)>,
     renderer: Renderer,
     rays: Vec<CameraRay>,
     targets: Vec<[f32; 3]>,
@@ -126,7 +124,6 @@ impl<'a> Trainer<'a> {
             grad_params: vec![0.0; n],
             rng: ChaCha8Rng::seed_from_u64(schedule.seed),
             pixels: (0..camera.width * camera.height).collect(),
-            last_checkpoint: None,
             pose_grads: vec![PoseGradient::new(); images.len()],
             pose_cotangents: Vec::with_capacity(images.len()),
             field,
@@ -229,20 +226,70 @@ impl<'a> Trainer<'a> {
         Ok(loss)
     }
 
-    /// Writes the field's and the pose correction's parameters after `iterations` steps to
-    /// `path` ([`write_checkpoint`]; a diverged state does not overwrite the last good
-    /// checkpoint, [`Trainer::last_checkpoint`]).
-    pub fn save_checkpoint(&mut self, path: &Path, iterations: u64) -> anyhow::Result<()> {
-        write_checkpoint(path, iterations, self.field.params(), &self.poses.params())?;
-        self.last_checkpoint = Some((path.to_path_buf(), iterations));
+    /// Writes everything the next steps depend on (the field and its optimiser, the random
+    /// generator and pixel permutation, the pose correction and its optimiser), so that a run
+    /// resumed by [`Trainer::load_state`] continues exactly. Errors without writing when a
+    /// parameter is not finite (a diverged run), so the last good checkpoint stays.
+    pub fn save_state(&self, w: &mut Writer) -> anyhow::Result<()> {
+        let bad = self
+            .field
+            .params()
+            .iter()
+            .filter(|v| !v.is_finite())
+            .count();
+        let bad_pose = self
+            .poses
+            .params()
+            .iter()
+            .filter(|v| !v.is_finite())
+            .count();
+        if bad + bad_pose > 0 {
+            bail!(
+                "{bad} field and {bad_pose} pose parameters are not finite; not overwriting the \
+                 last good checkpoint"
+            );
+        }
+        w.f32s(self.field.params());
+        w.adam(&self.optimizer.adam);
+        w.rng(&self.rng);
+        w.f64s(&self.pixels.iter().map(|&p| p as f64).collect::<Vec<_>>());
+        self.poses.save_state(w);
         Ok(())
     }
 
-    /// The last checkpoint [`Trainer::save_checkpoint`] wrote and after how many steps, if any.
-    pub fn last_checkpoint(&self) -> Option<(&Path, u64)> {
-        self.last_checkpoint
-            .as_ref()
-            .map(|(path, iterations)| (path.as_path(), *iterations))
+    /// Restores [`Trainer::save_state`] written after `it` steps into a trainer built with the
+    /// same config.
+    pub fn load_state(&mut self, r: &mut Reader, it: u64) -> anyhow::Result<()> {
+        let params = r.f32s()?;
+        if params.len() != self.field.num_params() {
+            bail!(
+                "{}: the checkpoint's field has {} parameters, this one {}",
+                r.path().display(),
+                params.len(),
+                self.field.num_params()
+            );
+        }
+        self.field.params_mut().copy_from_slice(&params);
+        let (start, steps) = field_round(
+            it,
+            self.schedule.field_restart_every,
+            self.schedule.field_restart_until,
+            self.schedule.iterations,
+        );
+        if start > 0 && !self.initial_field.is_empty() {
+            self.optimizer.restart(steps);
+        }
+        r.adam(&mut self.optimizer.adam)?;
+        self.rng = r.rng()?;
+        let pixels = r.f64s()?;
+        if pixels.len() != self.pixels.len() {
+            bail!(
+                "{}: the checkpoint's images have another size",
+                r.path().display()
+            );
+        }
+        self.pixels = pixels.into_iter().map(|p| p as usize).collect();
+        self.poses.load_state(r)
     }
 }
 
@@ -308,39 +355,6 @@ impl FieldOptimizer {
             );
         }
     }
-}
-
-/// Writes a field's and a pose correction's parameters after `iterations` steps to `path`
-/// (atomically, so the previous checkpoint survives a crash): the ASCII line
-/// `cpose-nerf checkpoint v1 <iterations> <field params> <pose params>\n`, then both parameter
-/// vectors as little-endian `f32`. Errors without writing if a parameter is not finite (a
-/// diverged run), so that `path` keeps the last good checkpoint.
-pub fn write_checkpoint(
-    path: &Path,
-    iterations: u64,
-    field: &[f32],
-    pose: &[f32],
-) -> anyhow::Result<()> {
-    let bad_field = field.iter().filter(|v| !v.is_finite()).count();
-    let bad_pose = pose.iter().filter(|v| !v.is_finite()).count();
-    if bad_field + bad_pose > 0 {
-        bail!(
-            "after {iterations} steps {bad_field} field and {bad_pose} pose parameters are not finite; not overwriting the checkpoint {}",
-            path.display()
-        );
-    }
-    let mut bytes = format!(
-        "cpose-nerf checkpoint v1 {iterations} {} {}\n",
-        field.len(),
-        pose.len()
-    )
-    .into_bytes();
-    bytes.reserve(4 * (field.len() + pose.len()));
-    for v in field.iter().chain(pose) {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    cpose_core::fs::write_atomic(path, bytes)
-        .with_context(|| format!("cannot write the checkpoint {}", path.display()))
 }
 
 /// `k` distinct entries of `permutation` drawn uniformly at random, in random order: a partial
@@ -582,34 +596,78 @@ pub(super) mod tests {
         );
     }
 
-    /// Issue "a NaN loss — one clear message, the last good checkpoint kept".
+    /// A state saved after `k` steps and loaded into a new trainer continues exactly as the
+    /// original, with and without field restarts (a restart at step 2, resumed inside and at
+    /// the start of a round).
     #[test]
-    fn a_non_finite_loss_stops_the_step_and_keeps_the_last_checkpoint() {
-        let dir = cpose_core::testing::TempDir::new("nerf-nan");
-        let path = dir.join("checkpoint.bin");
+    fn a_saved_state_continues_bit_for_bit() {
+        for (restart_every, k) in [(0, 3), (2, 3), (2, 4)] {
+            let losses = |resume_at: Option<u64>| -> Vec<f64> {
+                let mut tiny = Tiny::new();
+                let mut trainer = if restart_every > 0 {
+                    tiny.trainer_restarting(8, restart_every)
+                } else {
+                    tiny.trainer(8)
+                };
+                let mut out = Vec::new();
+                let mut it = 0;
+                if let Some(k) = resume_at {
+                    for i in 0..k {
+                        trainer.step(i).unwrap();
+                    }
+                    let mut w = Writer::new();
+                    trainer.save_state(&mut w).unwrap();
+                    let path = std::path::Path::new("state.bin");
+                    let mut r = Reader::from_bytes(path, w.into_bytes()).unwrap();
+                    let mut fresh = Tiny::new();
+                    let mut resumed = if restart_every > 0 {
+                        fresh.trainer_restarting(8, restart_every)
+                    } else {
+                        fresh.trainer(8)
+                    };
+                    resumed.load_state(&mut r, k).unwrap();
+                    for i in k..8 {
+                        out.push(resumed.step(i).unwrap());
+                    }
+                    return out;
+                }
+                while it < 8 {
+                    let loss = trainer.step(it).unwrap();
+                    if it >= k {
+                        out.push(loss);
+                    }
+                    it += 1;
+                }
+                out
+            };
+            assert_eq!(
+                losses(Some(k)),
+                losses(None),
+                "restart every {restart_every}, k {k}"
+            );
+        }
+    }
+
+    /// Issue "a NaN loss — one clear message, the last good checkpoint kept": a diverged state
+    /// is not saved.
+    #[test]
+    fn a_non_finite_loss_stops_the_step_and_its_state_is_not_saved() {
         let mut tiny = Tiny::new();
         let mut trainer = tiny.trainer(10);
-        assert_eq!(trainer.last_checkpoint(), None);
-        for it in 0..3 {
-            trainer.step(it).unwrap();
-        }
-        trainer.save_checkpoint(&path, 3).unwrap();
-        let saved = std::fs::read(&path).unwrap();
-        assert!(saved.starts_with(b"cpose-nerf checkpoint v1 3 "));
-        trainer.step(3).unwrap();
-
+        trainer.step(0).unwrap();
+        trainer.save_state(&mut Writer::new()).unwrap();
         // Every field parameter NaN: the loss of the next step is NaN.
         trainer.field.params_mut().fill(f32::NAN);
-        let err = trainer.step(4).unwrap_err().to_string();
-        assert_eq!(err, "the loss is NaN at iteration 4");
-        // A checkpoint of the diverged state is refused; the good one stays as it was.
-        let err = trainer.save_checkpoint(&path, 5).unwrap_err().to_string();
+        let err = trainer.step(1).unwrap_err().to_string();
+        assert_eq!(err, "the loss is NaN at iteration 1");
+        let err = trainer
+            .save_state(&mut Writer::new())
+            .unwrap_err()
+            .to_string();
         assert!(
-            err.contains("not finite") && err.contains("not overwriting the checkpoint"),
+            err.contains("not finite") && err.contains("not overwriting the last good checkpoint"),
             "{err}"
         );
         assert_eq!(err.lines().count(), 1, "{err}");
-        assert_eq!(std::fs::read(&path).unwrap(), saved);
-        assert_eq!(trainer.last_checkpoint(), Some((path.as_path(), 3)));
     }
 }

@@ -27,14 +27,12 @@ pub mod model;
 pub mod motion;
 pub mod train;
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::Mutex;
 
 use anyhow::Context;
 use cpose_core::registry::{Task, TaskInput};
+use cpose_core::study::{Metrics, Study, UnitKey};
 use cpose_core::{PoseNetConfig, Section};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::field2d::{GridConfig, ImageField, PeMlpConfig};
@@ -252,7 +250,7 @@ impl FieldChoice {
 }
 
 /// Everything a run needs, validated.
-struct Study {
+struct Setup {
     image: Image,
     name: String,
     original_size: [usize; 2],
@@ -269,7 +267,7 @@ struct Study {
     render_trajectories: usize,
 }
 
-impl Study {
+impl Setup {
     fn new(input: &TaskInput, exp: &Experiment) -> anyhow::Result<Self> {
         let config = input.config;
         let bad = |what: String| anyhow::anyhow!("{}: {what}", config.path().display());
@@ -478,20 +476,32 @@ impl Study {
     }
 }
 
-/// Aggregates over the trajectories of one method.
-#[derive(Debug, Serialize)]
-struct MethodSummary {
-    corner_err_px: f64,
-    corner_err_px_median: f64,
-    psnr_db: f64,
-    success_rate: f64,
-    wall_s: f64,
-    runs: Vec<RunResult>,
+/// The metrics of one method over its motions (the seeds of the study): mean and median corner
+/// error, mean PSNR, the fraction of motions aligned to within 1 px, and the summed wall time.
+fn summarise(runs: &[&Metrics]) -> Metrics {
+    let n = runs.len() as f64;
+    let values = |key: &str| -> Vec<f64> {
+        runs.iter()
+            .map(|m| m.number(key).unwrap_or(f64::NAN))
+            .collect()
+    };
+    let mut errs = values("corner_err_px");
+    errs.sort_by(f64::total_cmp);
+    Metrics::new()
+        .with("corner_err_px", errs.iter().sum::<f64>() / n)
+        .with("corner_err_px_median", median(&errs))
+        .with("psnr_db", values("psnr_db").iter().sum::<f64>() / n)
+        .with(
+            "success_rate",
+            errs.iter().filter(|&&e| e < 1.0).count() as f64 / n,
+        )
+        .with("wall_s", values("wall_s").iter().sum::<f64>())
+        .with("trajectories", runs.len())
 }
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
-    let study = Study::new(input, &exp)?;
+    let study = Setup::new(input, &exp)?;
     let seed = input.run.seed;
     let motions = (0..study.trajectories)
         .map(|k| study.motion(seed, k))
@@ -514,21 +524,45 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         study.schedule.iterations,
         study.schedule.pixels_per_step,
     ));
-    let jobs: Vec<(usize, Method)> = (0..study.trajectories)
-        .flat_map(|k| study.methods.iter().map(move |&m| (k, m)))
-        .collect();
-    let progress = input.progress((jobs.len() * study.schedule.iterations) as u64, "aligning");
-    let renders = Mutex::new(Vec::new());
-    let started = std::time::Instant::now();
-    let results: Vec<((usize, Method), RunResult)> = jobs
-        .par_iter()
-        .map(|&(k, method)| -> anyhow::Result<_> {
+    for k in 0..study.render_trajectories.min(study.trajectories) {
+        let patches = train::sample_patches(&study.image, &study.layout, &motions[k].params);
+        render::patch_strip(&patches, &study.layout).save_png(
+            input
+                .run_dir
+                .file(format!("patches_{}_s{k}.png", study.name)),
+        )?;
+    }
+    // One unit per method and motion; the motion's index is the unit's seed.
+    let mut units = Vec::new();
+    for k in 0..study.trajectories {
+        for m in &study.methods {
+            units.push(UnitKey::new(study.name.as_str(), m.key(), k as u64));
+        }
+    }
+    Study::new(input, units)
+        .parallel(true)
+        .report_every(200)
+        .columns(&[
+            "corner_err_px",
+            "corner_err_px_median",
+            "psnr_db",
+            "success_rate",
+        ])
+        .summarise(summarise)
+        .run(|unit| {
+            let k = unit.key().seed as usize;
+            let method = *study
+                .methods
+                .iter()
+                .find(|m| m.key() == unit.key().method)
+                .context("a method of the config")?;
             let motion = &motions[k];
             let patches = train::sample_patches(&study.image, &study.layout, &motion.params);
             // The same neural-image initialisation and pixel draws for every method.
             let job_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
             let mut field = study.field.init(job_seed)?;
             let mut model = study.model(method, job_seed)?;
+            unit.set_steps(study.schedule.iterations);
             let (outcome, wall_s) = train::timed(|| {
                 Trainer::new(
                     field.as_mut(),
@@ -538,10 +572,19 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     study.schedule,
                     job_seed,
                 )
-                .run(&|| progress.inc(1))
+                .run(&mut |done, loss, params| {
+                    if unit.report_due(done) {
+                        let dim = study.spec.warp.dim();
+                        let warps: Vec<Vec<f64>> =
+                            params.chunks(dim).map(<[f64]>::to_vec).collect();
+                        let warps = train::relative_to_first(study.spec.warp, &warps);
+                        let corner = train::corner_error_px(&study.layout, &warps, &motion.params);
+                        unit.report(done, &[("loss", loss), ("corner_err_px", corner)]);
+                    }
+                    Ok(())
+                })
             });
-            let (final_loss, warps) =
-                outcome.with_context(|| format!("trajectory {k}, method {}", method.key()))?;
+            let (final_loss, warps) = outcome?;
             let first = Warp::new(study.spec.warp, &warps[0]);
             let rendered = train::render(
                 field.as_mut(),
@@ -550,61 +593,20 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 &first,
             );
             let warps = train::relative_to_first(study.spec.warp, &warps);
-            let result = RunResult {
+            if k < study.render_trajectories {
+                let overlay = render::overlay(&study.image, &study.layout, &motion.params, &warps);
+                overlay
+                    .beside(&rendered)
+                    .save_png(unit.file("overlay", "png"))?;
+            }
+            Metrics::from_serialize(&RunResult {
                 corner_err_px: train::corner_error_px(&study.layout, &warps, &motion.params),
                 psnr_db: train::region_psnr(&rendered, &study.image, &study.layout, &motion.params),
                 final_loss,
                 wall_s,
                 warps,
-            };
-            if k < study.render_trajectories
-                && let Ok(mut r) = renders.lock()
-            {
-                r.push((k, method, rendered, result.warps.clone()));
-            }
-            Ok(((k, method), result))
-        })
-        .collect::<anyhow::Result<_>>()?;
-    progress.finish();
-    let wall = started.elapsed().as_secs_f64();
-
-    let mut by_method: BTreeMap<Method, Vec<RunResult>> = BTreeMap::new();
-    for ((_, m), r) in results {
-        by_method.entry(m).or_default().push(r);
-    }
-    let mut summary: BTreeMap<&str, MethodSummary> = BTreeMap::new();
-    for (m, runs) in by_method {
-        let n = runs.len() as f64;
-        let mut errs: Vec<f64> = runs.iter().map(|r| r.corner_err_px).collect();
-        errs.sort_by(f64::total_cmp);
-        summary.insert(
-            m.key(),
-            MethodSummary {
-                corner_err_px: errs.iter().sum::<f64>() / n,
-                corner_err_px_median: median(&errs),
-                psnr_db: runs.iter().map(|r| r.psnr_db).sum::<f64>() / n,
-                success_rate: errs.iter().filter(|&&e| e < 1.0).count() as f64 / n,
-                wall_s: runs.iter().map(|r| r.wall_s).sum(),
-                runs,
-            },
-        );
-    }
-    let mut renders = renders.into_inner().unwrap_or_default();
-    renders.sort_by_key(|(k, m, ..)| (*k, *m));
-    for (k, method, rendered, warps) in renders {
-        let truth = &motions[k].params;
-        let overlay = render::overlay(&study.image, &study.layout, truth, &warps);
-        let pair = overlay.beside(&rendered);
-        pair.save_png(input.run_dir.file(format!("{}_t{k:02}.png", method.key())))?;
-    }
-    for k in 0..study.render_trajectories.min(study.trajectories) {
-        let patches = train::sample_patches(&study.image, &study.layout, &motions[k].params);
-        render::patch_strip(&patches, &study.layout)
-            .save_png(input.run_dir.file(format!("patches_t{k:02}.png")))?;
-    }
-    let metrics = BTreeMap::from([(study.name.clone(), summary)]);
-    input.run_dir.write_json("metrics.json", &metrics)?;
-    input.run_dir.log(table(&metrics, wall));
+            })
+        })?;
     Ok(())
 }
 
@@ -618,28 +620,6 @@ fn median(sorted: &[f64]) -> f64 {
     } else {
         0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
     }
-}
-
-/// The paper's table: corner error, PSNR and success rate per method.
-fn table(metrics: &BTreeMap<String, BTreeMap<&str, MethodSummary>>, wall_s: f64) -> String {
-    let mut s = format!(
-        "\n{:<12} {:<9} {:>10} {:>10} {:>9} {:>8} {:>9}\n",
-        "image", "method", "CE [px]", "CE median", "PSNR", "SR", "cpu [s]"
-    );
-    for (image, methods) in metrics {
-        for (name, m) in methods {
-            s.push_str(&format!(
-                "{image:<12} {name:<9} {:>10.3} {:>10.3} {:>9.2} {:>7.0}% {:>9.1}\n",
-                m.corner_err_px,
-                m.corner_err_px_median,
-                m.psnr_db,
-                100.0 * m.success_rate,
-                m.wall_s
-            ));
-        }
-    }
-    s.push_str(&format!("study wall time {wall_s:.1} s\n"));
-    s
 }
 
 pub mod render {

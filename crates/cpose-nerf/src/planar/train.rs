@@ -95,6 +95,10 @@ pub fn sample_patches(image: &Image, layout: &Layout, truth: &[Vec<f64>]) -> Vec
         .collect()
 }
 
+/// Called after every training step with the steps done, the step's loss and the warp
+/// parameters it was computed with.
+pub type OnStep<'a> = dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()> + 'a;
+
 /// One method on one motion: the neural image, the pose model and the step's buffers (reused, so
 /// a step does not allocate).
 pub struct Trainer<'a> {
@@ -223,13 +227,17 @@ impl<'a> Trainer<'a> {
         Ok(loss)
     }
 
-    /// Runs the remaining steps (calling `on_step` after each) and returns the last loss and
-    /// the final warp parameters per patch.
-    pub fn run(mut self, on_step: &(dyn Fn() + Sync)) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
+    /// Runs the remaining steps and returns the last loss and the final warp parameters per
+    /// patch. After each step, `on_step` gets the steps done, the step's loss and the warp
+    /// parameters that loss was computed with.
+    pub fn run(
+        mut self,
+        on_step: &mut OnStep<'_>,
+    ) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
         let mut loss = f64::NAN;
         while self.it < self.schedule.iterations {
             loss = self.step()?;
-            on_step();
+            on_step(self.it, loss, &self.params)?;
         }
         self.field.set_progress(1.0);
         self.model.warps(&mut self.params, 1.0)?;
