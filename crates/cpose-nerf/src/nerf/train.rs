@@ -296,6 +296,16 @@ impl FieldOptimizer {
         }
     }
 
+    /// Adam's moments and step count (for checkpoints).
+    pub fn adam(&self) -> &Adam<f32> {
+        &self.adam
+    }
+
+    /// Adam's state, to restore a checkpoint.
+    pub fn adam_mut(&mut self) -> &mut Adam<f32> {
+        &mut self.adam
+    }
+
     /// One Adam step of every group from the gradient `grad` at iteration `it`.
     pub fn step(&mut self, field: &mut dyn RadianceField, grad: &[f32], it: u64) {
         self.adam.begin_step();

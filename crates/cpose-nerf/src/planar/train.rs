@@ -95,6 +95,10 @@ pub fn sample_patches(image: &Image, layout: &Layout, truth: &[Vec<f64>]) -> Vec
         .collect()
 }
 
+/// What [`Trainer::run`] calls after every step: steps done, the step's loss, the warp
+/// parameters.
+type OnStep<'a> = dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()> + 'a;
+
 /// One method on one motion: the neural image, the pose model and the step's buffers (reused, so
 /// a step does not allocate).
 pub struct Trainer<'a> {
@@ -226,10 +230,7 @@ impl<'a> Trainer<'a> {
     /// Runs the remaining steps and returns the last loss and the final warp parameters per
     /// patch. After each step, `on_step` gets the steps done, the step's loss and the warp
     /// parameters that loss was computed with.
-    pub fn run(
-        mut self,
-        on_step: &mut dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()>,
-    ) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
+    pub fn run(mut self, on_step: &mut OnStep<'_>) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
         let mut loss = f64::NAN;
         while self.it < self.schedule.iterations {
             loss = self.step()?;
