@@ -59,8 +59,8 @@ fn metrics(dir: &Path) -> Value {
             map.values_mut().for_each(strip);
         }
     }
-    let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
-    let mut v = serde_json::from_str(&text).unwrap();
+    let text = std::fs::read_to_string(dir.join("metrics.json")).expect("metrics.json");
+    let mut v = serde_json::from_str(&text).expect("metrics.json is JSON");
     strip(&mut v);
     v
 }
@@ -114,11 +114,11 @@ fn interrupt(
         .args(run_args(config, settings, &cut))
         .stderr(std::process::Stdio::null())
         .spawn()
-        .unwrap();
+        .expect("the cpose binary starts");
     let started = Instant::now();
     while !ready(&cut) {
         assert!(
-            child.try_wait().unwrap().is_none(),
+            child.try_wait().expect("the run can be polled").is_none(),
             "the run finished before it could be killed"
         );
         assert!(
@@ -127,8 +127,8 @@ fn interrupt(
         );
         std::thread::sleep(Duration::from_millis(5));
     }
-    child.kill().unwrap(); // SIGKILL
-    child.wait().unwrap();
+    child.kill().expect("the run can be killed"); // SIGKILL
+    child.wait().expect("the killed run is reaped");
     let done_before = count(&cut, "result.json");
     assert!(done_before >= finished);
     let out = cpose(&[
@@ -142,7 +142,7 @@ fn interrupt(
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let log = std::fs::read_to_string(cut.join("log.txt")).unwrap();
+    let log = std::fs::read_to_string(cut.join("log.txt")).expect("log.txt");
     assert_eq!(
         log.matches("finished before the resume").count(),
         done_before,
@@ -162,11 +162,15 @@ fn interrupt(
 /// Every `traj_*.txt` of `a` equals the one of `b`, byte for byte.
 fn same_trajectories(a: &Path, b: &Path) {
     let mut n = 0;
-    for entry in std::fs::read_dir(a).unwrap() {
-        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+    for entry in std::fs::read_dir(a).expect("the run folder") {
+        let name = entry
+            .expect("a folder entry")
+            .file_name()
+            .to_string_lossy()
+            .into_owned();
         if name.starts_with("traj_") && name.ends_with(".txt") {
             let (x, y) = (
-                std::fs::read(a.join(&name)).unwrap(),
+                std::fs::read(a.join(&name)).expect("a trajectory"),
                 std::fs::read(b.join(&name)),
             );
             assert_eq!(Some(x), y.ok(), "{name}");
@@ -375,4 +379,41 @@ fn synth_room_resumes_after_kill_9_with_the_same_room() {
             "{name}"
         );
     }
+}
+
+/// Events units checkpoint every step here: the PoseNet unit, killed half-way, continues from
+/// its field, pose correction, optimisers and random draws.
+#[test]
+fn events_resumes_after_kill_9_with_the_uninterrupted_results() {
+    let settings = [
+        "simulation.width=24",
+        "simulation.height=18",
+        "simulation.render_steps=40",
+        "simulation.held_out_views=1",
+        "experiment.known_poses=[6]",
+        "train.methods=[\"eventnerf\",\"posenet\"]",
+        "train.iterations=40",
+        "train.rays_per_step=64",
+        "train.windows_per_step=2",
+        "render.samples=12",
+        "eval.pose_samples=10",
+        "run.report_every=10",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+    ];
+    let (whole, cut) = kill_and_resume("configs/events_interp.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+    assert!(cut.join("view_0_K6_posenet.png").is_file());
+    // The live curves agree too, but for their wall-clock column.
+    let curves = |d: &Path| -> Vec<String> {
+        let text = std::fs::read_to_string(d.join("curves.csv")).unwrap();
+        text.lines()
+            .map(|l| {
+                let mut c: Vec<&str> = l.split(',').collect();
+                c.remove(4);
+                c.join(",")
+            })
+            .collect()
+    };
+    assert_eq!(curves(&cut), curves(&whole));
 }

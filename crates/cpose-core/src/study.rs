@@ -303,6 +303,9 @@ impl std::fmt::Debug for Study<'_> {
 /// The finished units' metrics, by unit.
 pub type Results = BTreeMap<UnitKey, Metrics>;
 
+/// One condition's metrics, by method, then seed.
+type BySeed<'a> = BTreeMap<&'a str, Vec<(u64, &'a Metrics)>>;
+
 impl<'a> Study<'a> {
     /// A study of `units`, run in order, one at a time.
     pub fn new(input: &'a TaskInput<'a>, units: Vec<UnitKey>) -> Self {
@@ -428,7 +431,7 @@ impl<'a> Study<'a> {
 
     /// `metrics.json`: condition → method → metrics (seeds summarised, each kept under `runs`).
     fn metrics_json(&self, results: &Results) -> Value {
-        let mut grouped: BTreeMap<&str, BTreeMap<&str, Vec<_>>> = BTreeMap::new();
+        let mut grouped: BTreeMap<&str, BySeed<'_>> = BTreeMap::new();
         for (k, m) in results {
             grouped
                 .entry(&k.condition)

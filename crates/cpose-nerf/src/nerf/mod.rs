@@ -869,14 +869,16 @@ fn train_steps(
         let done = it + 1;
         if unit.report_due(done) {
             let loss = mean(&recent, done);
-            let errors = barf_pose_errors(truth, trainer.poses().current(), ReflectionFix::Kabsch)?;
+            // Undefined while the cameras' centres still coincide (an unknown-pose start).
+            let errors = barf_pose_errors(truth, trainer.poses().current(), ReflectionFix::Kabsch)
+                .map_or((f64::NAN, f64::NAN), |e| (e.rot_err_deg, e.trans_err));
             unit.report(
                 done,
                 &[
                     ("loss", loss),
                     ("psnr_train_db", -10.0 * loss.log10()),
-                    ("rot_err_deg", errors.rot_err_deg),
-                    ("trans_err", errors.trans_err),
+                    ("rot_err_deg", errors.0),
+                    ("trans_err", errors.1),
                 ],
             );
         }

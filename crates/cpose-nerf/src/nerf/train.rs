@@ -250,10 +250,10 @@ impl<'a> Trainer<'a> {
             );
         }
         w.f32s(self.field.params());
-        w.adam(&self.optimizer.adam);
+        w.adam(self.optimizer.adam());
         w.rng(&self.rng);
         w.f64s(&self.pixels.iter().map(|&p| p as f64).collect::<Vec<_>>());
-        self.poses.save_state(w);
+        self.poses.write_state(w);
         Ok(())
     }
 
@@ -279,7 +279,7 @@ impl<'a> Trainer<'a> {
         if start > 0 && !self.initial_field.is_empty() {
             self.optimizer.restart(steps);
         }
-        r.adam(&mut self.optimizer.adam)?;
+        r.adam(self.optimizer.adam_mut())?;
         self.rng = r.rng()?;
         let pixels = r.f64s()?;
         if pixels.len() != self.pixels.len() {
@@ -289,7 +289,7 @@ impl<'a> Trainer<'a> {
             );
         }
         self.pixels = pixels.into_iter().map(|p| p as usize).collect();
-        self.poses.load_state(r)
+        self.poses.read_state(r)
     }
 }
 
@@ -340,6 +340,16 @@ impl FieldOptimizer {
         for (_, decay) in &mut self.groups {
             decay.max_iter = iterations;
         }
+    }
+
+    /// Adam's moments and step count (for checkpoints).
+    pub fn adam(&self) -> &Adam<f32> {
+        &self.adam
+    }
+
+    /// Adam's state, to restore a checkpoint.
+    pub fn adam_mut(&mut self) -> &mut Adam<f32> {
+        &mut self.adam
     }
 
     /// One Adam step of every group from the gradient `grad` at iteration `it`.

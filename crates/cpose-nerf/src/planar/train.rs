@@ -230,10 +230,7 @@ impl<'a> Trainer<'a> {
     /// Runs the remaining steps and returns the last loss and the final warp parameters per
     /// patch. After each step, `on_step` gets the steps done, the step's loss and the warp
     /// parameters that loss was computed with.
-    pub fn run(
-        mut self,
-        on_step: &mut OnStep<'_>,
-    ) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
+    pub fn run(mut self, on_step: &mut OnStep<'_>) -> anyhow::Result<(f64, Vec<Vec<f64>>)> {
         let mut loss = f64::NAN;
         while self.it < self.schedule.iterations {
             loss = self.step()?;
