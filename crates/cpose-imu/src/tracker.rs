@@ -71,8 +71,8 @@ use crate::losses;
 pub struct ImuTrackConfig {
     /// Weight `λ_g` of the gyroscope loss (loose or tight) against the tracking loss per pixel.
     /// Tight's residual is a rate: over a frame interval `Δ` a rotation error `δ` costs about
-    /// `λ_g δ/Δ` there and `λ_g δ` in loose's. In windows on EuRoC V1_02 at 10 Hz, 0.1 carried
-    /// the network through the fast stretch where the paper's 1 lost it (README).
+    /// `λ_g δ/Δ` there and `λ_g δ` in loose's; the windowed setting's weight is chosen in
+    /// `docs/results/imu.md`.
     pub gyro_weight: f64,
     /// Weight `λ_a` of the accelerometer's tie in the relative family ([`RelativeImu`]); the
     /// absolute network's start takes the accelerometer's position as it is.

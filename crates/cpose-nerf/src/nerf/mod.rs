@@ -10,9 +10,9 @@
 //!
 //! One departure from the paper: the pose learning rates ramp up linearly over the first
 //! `[train] pose_warmup` of the steps (default 10%). Before the field has learnt anything its
-//! pose gradients are noise; without the ramp PoseNet moved even the true poses by 1.3° in the
-//! first 250 steps and, at 60° / 20% noise, doubled the rotation error (31° → 62°) within 500.
-//! `[train] rotation_warmup` gives PoseNet's rotation network a ramp of its own.
+//! pose gradients are noise, and poses moved at full rate move away from the truth (measured in
+//! `docs/results/nerf.md`). `[train] rotation_warmup` gives PoseNet's rotation network a ramp of
+//! its own.
 //!
 //! An option beyond the paper for large noise: `[train] field_restart_every = K` restarts the
 //! field every `K` steps up to `field_restart_until` (a fraction of the steps) while the poses
@@ -40,11 +40,12 @@
 //! centres, as LLFF's — Kabsch's fix replaces BARF's third-row negation, which can misalign by
 //! many degrees ([`ReflectionFix`]); the log and `metrics.json` then also give BARF's reading.
 //!
-//! Outputs: `metrics.json`
-//! (`{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err, psnr_db, ssim, …}}}`),
-//! `traj_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`, `traj_init.txt` (TUM),
-//! `trajectory_<method>.png`, `view_<k>_<method>.png` (rendered | truth), `depth_<k>_<method>.png`,
-//! `checkpoint_<method>.bin`.
+//! Every method is a unit of a study ([`cpose_core::study`]) whose checkpoints hold the whole
+//! training state, so `cpose run --resume` continues a killed run exactly. Outputs besides the
+//! study's: `traj_gt.txt`, `traj_init.txt` (TUM), and per method `traj_<condition>_<method>.txt`
+//! (estimated, aligned to the truth), `trajectory_…png`, `view<k>_…png` (rendered | truth),
+//! `depth<k>_…png`; `metrics.json` holds
+//! `{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err, psnr_db, ssim, …}}}`.
 
 pub mod eval;
 pub mod poses;
