@@ -234,11 +234,9 @@ fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
     let run_config = config.run_config().map_err(|e| usage(e.into()))?;
     let task = registry::task_for(&config).map_err(|e| usage(e.into()))?;
     if let Some(dir) = &args.resume {
-        // Studies say whether their folder can be resumed (of this task and config, unfinished)
-        // before anything runs; the folders of tasks without one resume as they can.
-        if dir.join("study.json").exists() {
-            study::check_resume(dir, task.name, &config).map_err(|e| usage(e.into()))?;
-        }
+        // Whether the folder can be resumed (a study of this task and config, unfinished),
+        // before anything runs.
+        study::check_resume(dir, task.name, &config).map_err(|e| usage(e.into()))?;
     }
     run_config.init_thread_pool();
 

@@ -2,13 +2,16 @@
 //! middle of a unit and resumed ends with the metrics and files of an uninterrupted run with the
 //! same seed; finished units are not run again; folders that cannot be resumed say why.
 
+// The helpers below are test code too: a failed file operation should just fail the test.
+#![allow(clippy::unwrap_used)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::util::{TempDir, temp_dir};
+use crate::util::{TempDir, temp_dir, unit_file};
 
 fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -56,8 +59,8 @@ fn metrics(dir: &Path) -> Value {
             map.values_mut().for_each(strip);
         }
     }
-    let text = std::fs::read_to_string(dir.join("metrics.json")).unwrap();
-    let mut v = serde_json::from_str(&text).unwrap();
+    let text = std::fs::read_to_string(dir.join("metrics.json")).expect("metrics.json");
+    let mut v = serde_json::from_str(&text).expect("metrics.json is JSON");
     strip(&mut v);
     v
 }
@@ -70,6 +73,20 @@ fn kill_and_resume(
     finished: usize,
     mid_unit: bool,
 ) -> (TempDir, TempDir) {
+    let ready = |dir: &Path| {
+        count(dir, "result.json") >= finished && (!mid_unit || count(dir, "checkpoint.bin") > 0)
+    };
+    kill_when(config, settings, ready, finished, mid_unit)
+}
+
+/// [`kill_and_resume`] with the moment of the kill chosen by `ready`.
+fn kill_when(
+    config: &str,
+    settings: &[&str],
+    ready: impl Fn(&Path) -> bool,
+    finished: usize,
+    mid_unit: bool,
+) -> (TempDir, TempDir) {
     let whole = temp_dir("resume-whole");
     let out = cpose(&run_args(config, settings, &whole));
     assert!(
@@ -77,28 +94,43 @@ fn kill_and_resume(
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let cut = interrupt(config, settings, ready, finished, mid_unit);
+    assert_eq!(metrics(&cut), metrics(&whole));
+    (whole, cut)
+}
+
+/// Runs `config`, kills it with SIGKILL once `ready` holds and resumes it: at least `finished`
+/// units are kept by the resume and, with `mid_unit`, one continues from its checkpoint.
+fn interrupt(
+    config: &str,
+    settings: &[&str],
+    ready: impl Fn(&Path) -> bool,
+    finished: usize,
+    mid_unit: bool,
+) -> TempDir {
     let cut = temp_dir("resume-cut");
     let mut child = Command::new(env!("CARGO_BIN_EXE_cpose"))
         .current_dir(workspace_root())
         .args(run_args(config, settings, &cut))
+        .stderr(std::process::Stdio::null())
         .spawn()
-        .unwrap();
+        .expect("the cpose binary starts");
     let started = Instant::now();
-    while count(&cut, "result.json") < finished || (mid_unit && count(&cut, "checkpoint.bin") == 0)
-    {
+    while !ready(&cut) {
         assert!(
-            child.try_wait().unwrap().is_none(),
+            child.try_wait().expect("the run can be polled").is_none(),
             "the run finished before it could be killed"
         );
         assert!(
             started.elapsed().as_secs() < 600,
-            "no checkpoint in 10 minutes"
+            "not ready to be killed in 10 minutes"
         );
         std::thread::sleep(Duration::from_millis(5));
     }
-    child.kill().unwrap(); // SIGKILL
-    child.wait().unwrap();
+    child.kill().expect("the run can be killed"); // SIGKILL
+    child.wait().expect("the killed run is reaped");
     let done_before = count(&cut, "result.json");
+    assert!(done_before >= finished);
     let out = cpose(&[
         "run".into(),
         "--resume".into(),
@@ -110,30 +142,35 @@ fn kill_and_resume(
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let log = std::fs::read_to_string(cut.join("log.txt")).unwrap();
+    let log = std::fs::read_to_string(cut.join("log.txt")).expect("log.txt");
     assert_eq!(
         log.matches("finished before the resume").count(),
         done_before,
         "{log}"
     );
-    assert_eq!(log.contains("resumed after step"), mid_unit, "{log}");
-    assert_eq!(metrics(&cut), metrics(&whole));
+    if mid_unit {
+        assert!(log.contains("resumed after step"), "{log}");
+    }
     assert_eq!(
         count(&cut, "checkpoint.bin"),
         0,
         "finished units keep no checkpoint"
     );
-    (whole, cut)
+    cut
 }
 
 /// Every `traj_*.txt` of `a` equals the one of `b`, byte for byte.
 fn same_trajectories(a: &Path, b: &Path) {
     let mut n = 0;
-    for entry in std::fs::read_dir(a).unwrap() {
-        let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+    for entry in std::fs::read_dir(a).expect("the run folder") {
+        let name = entry
+            .expect("a folder entry")
+            .file_name()
+            .to_string_lossy()
+            .into_owned();
         if name.starts_with("traj_") && name.ends_with(".txt") {
             let (x, y) = (
-                std::fs::read(a.join(&name)).unwrap(),
+                std::fs::read(a.join(&name)).expect("a trajectory"),
                 std::fs::read(b.join(&name)),
             );
             assert_eq!(Some(x), y.ok(), "{name}");
@@ -221,4 +258,162 @@ fn nerf_resumes_after_kill_9_with_the_uninterrupted_results() {
     ];
     let (whole, cut) = kill_and_resume("configs/nerf_synthetic.toml", &settings, 1, true);
     same_trajectories(&whole, &cut);
+}
+
+/// `slam` checkpoints its map, estimates and pose model: the killed method continues after its
+/// last frame. The per-frame tracking log keeps the rows from before the kill, none twice, and
+/// its errors are those of the trajectory.
+#[test]
+fn slam_resumes_after_kill_9_with_the_uninterrupted_trajectory() {
+    let data = temp_dir("resume-room");
+    let path = format!("data.path={}", data.display());
+    let settings = [
+        "synthetic.frames=24",
+        "synthetic.width=48",
+        "tracking.edge=2",
+        "tracking.pixels=64",
+        "mapping.pixels=128",
+        "mapping.first_iterations=40",
+        "slam.methods=[\"baseline\", \"prev\"]",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+        &path,
+    ];
+    let (whole, cut) = kill_and_resume("configs/synthetic_room.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+    let rows = |dir: &Path| -> Vec<Vec<f64>> {
+        let text = std::fs::read_to_string(unit_file(dir, "tracking", "prev", "csv")).unwrap();
+        let mut lines = text.lines();
+        assert!(
+            lines
+                .next()
+                .unwrap()
+                .starts_with("frame,time_s,start_error_cm,error_cm,")
+        );
+        lines
+            .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+            .collect()
+    };
+    let (whole_rows, cut_rows) = (rows(&whole), rows(&cut));
+    let frames: Vec<f64> = whole_rows.iter().map(|r| r[0]).collect();
+    assert_eq!(frames, (1..24).map(f64::from).collect::<Vec<_>>());
+    assert_eq!(whole_rows, cut_rows);
+    let a = cpose_core::eval::read_tum(unit_file(&whole, "traj", "prev", "txt")).unwrap();
+    let gt = cpose_core::eval::read_tum(whole.join("traj_gt.txt")).unwrap();
+    for r in &whole_rows {
+        let (i, start_cm, cm, moved_cm) = (r[0] as usize, r[2], r[3], r[6]);
+        let truth = 100.0 * (a.poses()[i].translation.vector - gt.poses()[i].translation.vector);
+        assert!(
+            (cm - truth.norm()).abs() < 2e-3,
+            "frame {i}: {cm} against {truth}"
+        );
+        // The start is where tracking began: the two errors differ by at most the move.
+        assert!((cm - start_cm).abs() <= moved_cm + 2e-3, "frame {i}: {r:?}");
+    }
+}
+
+/// `slam_imu` runs its methods through the same units as `slam`.
+#[test]
+fn slam_imu_resumes_after_kill_9_with_the_uninterrupted_results() {
+    let data = temp_dir("resume-imu");
+    let path = format!("data.path={}", data.display());
+    let settings = [
+        "synthetic.width=48",
+        "synthetic.frames=21",
+        "tracking.edge=2",
+        "tracking.pixels=64",
+        "tracking.iterations=5",
+        "mapping.pixels=128",
+        "mapping.first_iterations=20",
+        "mapping.iterations=5",
+        "imu.predict_steps=3",
+        "mesh.voxel=0",
+        "slam.methods=[\"baseline\", \"tight\"]",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+        &path,
+    ];
+    let (whole, cut) = kill_and_resume("configs/synthetic_imu.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+}
+
+/// `synth_room` is one unit: killed while it writes the room, it writes it again.
+#[test]
+fn synth_room_resumes_after_kill_9_with_the_same_room() {
+    let (a, b) = (temp_dir("resume-synth-a"), temp_dir("resume-synth-b"));
+    let (path_a, path_b) = (
+        format!("output.path={}", a.display()),
+        format!("output.path={}", b.display()),
+    );
+    let small = ["synthetic.frames=60", "synthetic.width=48", "run.threads=1"];
+    let whole = temp_dir("resume-synth-whole");
+    let mut settings: Vec<&str> = small.to_vec();
+    settings.push(&path_a);
+    let out = cpose(&run_args("configs/synth_room.toml", &settings, &whole));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The interrupted run writes into its own folder, killed once a few frames are there.
+    let mut settings: Vec<&str> = small.to_vec();
+    settings.push(&path_b);
+    let frames = |dir: &Path| std::fs::read_dir(dir.join("results")).map_or(0, |e| e.count());
+    let target = b.to_path_buf();
+    let cut = interrupt(
+        "configs/synth_room.toml",
+        &settings,
+        move |_| frames(&target) >= 4,
+        0,
+        false,
+    );
+    assert_eq!(metrics(&cut)["room"]["synthetic"]["frames"], 60);
+    for name in [
+        "traj.txt",
+        "results/frame000059.jpg",
+        "results/depth000059.png",
+    ] {
+        assert_eq!(
+            std::fs::read(a.join(name)).ok(),
+            std::fs::read(b.join(name)).ok(),
+            "{name}"
+        );
+    }
+}
+
+/// Events units checkpoint every step here: the PoseNet unit, killed half-way, continues from
+/// its field, pose correction, optimisers and random draws.
+#[test]
+fn events_resumes_after_kill_9_with_the_uninterrupted_results() {
+    let settings = [
+        "simulation.width=24",
+        "simulation.height=18",
+        "simulation.render_steps=40",
+        "simulation.held_out_views=1",
+        "experiment.known_poses=[6]",
+        "train.methods=[\"eventnerf\",\"posenet\"]",
+        "train.iterations=40",
+        "train.rays_per_step=64",
+        "train.windows_per_step=2",
+        "render.samples=12",
+        "eval.pose_samples=10",
+        "run.report_every=10",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+    ];
+    let (whole, cut) = kill_and_resume("configs/events_interp.toml", &settings, 1, true);
+    same_trajectories(&whole, &cut);
+    assert!(cut.join("view_0_K6_posenet.png").is_file());
+    // The live curves agree too, but for their wall-clock column.
+    let curves = |d: &Path| -> Vec<String> {
+        let text = std::fs::read_to_string(d.join("curves.csv")).unwrap();
+        text.lines()
+            .map(|l| {
+                let mut c: Vec<&str> = l.split(',').collect();
+                c.remove(4);
+                c.join(",")
+            })
+            .collect()
+    };
+    assert_eq!(curves(&cut), curves(&whole));
 }

@@ -259,8 +259,14 @@ fn config_hash(config: &Config) -> String {
 /// resuming; [`Study::run`] calls it too).
 pub fn check_resume(dir: &Path, task: &str, config: &Config) -> Result<(), ResumeError> {
     let path = dir.join("study.json");
-    let text =
-        std::fs::read_to_string(&path).map_err(|_| ResumeError::NotAStudy(dir.to_owned()))?;
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        // Killed before its study began: nothing to keep, the study starts from the beginning.
+        // Results without a manifest are an older cpose's.
+        if dir.join("metrics.json").exists() {
+            return Err(ResumeError::NotAStudy(dir.to_owned()));
+        }
+        return Ok(());
+    };
     let manifest: Manifest = serde_json::from_str(&text).map_err(|e| ResumeError::Corrupt {
         path: path.clone(),
         message: format!("not a study manifest: {e}"),
@@ -303,6 +309,9 @@ impl std::fmt::Debug for Study<'_> {
 
 /// The finished units' metrics, by unit.
 pub type Results = BTreeMap<UnitKey, Metrics>;
+
+/// One condition's metrics, by method, then seed.
+type BySeed<'a> = BTreeMap<&'a str, Vec<(u64, &'a Metrics)>>;
 
 impl<'a> Study<'a> {
     /// A study of `units`, run in order, one at a time.
@@ -437,7 +446,7 @@ impl<'a> Study<'a> {
 
     /// `metrics.json`: condition → method → metrics (seeds summarised, each kept under `runs`).
     fn metrics_json(&self, results: &Results) -> Value {
-        let mut grouped: BTreeMap<&str, BTreeMap<&str, Vec<_>>> = BTreeMap::new();
+        let mut grouped: BTreeMap<&str, BySeed<'_>> = BTreeMap::new();
         for (k, m) in results {
             grouped
                 .entry(&k.condition)
@@ -779,6 +788,11 @@ impl Unit<'_> {
         }
         self.progress.set_message(format!("{} {line}", self.name));
         self.log(line);
+    }
+
+    /// Wall seconds the unit has run, over every session.
+    pub fn wall_secs(&self) -> f64 {
+        self.elapsed().0
     }
 
     /// Whether a checkpoint is due: `[run] checkpoint_secs` have passed since the last one
@@ -1125,6 +1139,9 @@ mod tests {
     fn resume_refuses_other_tasks_configs_and_non_studies() {
         let dir = TempDir::new("study-refuse");
         let config = Config::from_text("c.toml", CONFIG);
+        // Killed before the study began: it starts from the beginning.
+        check_resume(&dir, "demo", &config).unwrap();
+        std::fs::write(dir.join("metrics.json"), "{}").unwrap();
         let e = check_resume(&dir, "demo", &config).unwrap_err();
         assert!(e.to_string().contains("no study.json"), "{e}");
         std::fs::write(dir.join("study.json"), "{").unwrap();

@@ -15,9 +15,8 @@ use cpose_events::simulate::{SyntheticEventsConfig, simulate_eventnerf_scene};
 use cpose_events::train::{EventSchedule, EventTrainer, InitialPath, KeyedPoses};
 use cpose_nerf::field3d::{RadianceFieldConfig, SceneBounds};
 use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
-use cpose_nerf::nerf::render::{Clip, RenderSettings};
+use cpose_nerf::render::{Clip, LastInterval, RenderSettings, Sampling};
 use cpose_nerf::scene::SyntheticScene;
-use cpose_nerf::volume::{LastInterval, Sampling};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 fn bench(c: &mut Criterion) {

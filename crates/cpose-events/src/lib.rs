@@ -42,6 +42,6 @@ pub use simulate::{
     EventSimulator, SimulatedEvents, SimulatorConfig, SyntheticEventsConfig, bayer_channel,
     simulate_eventnerf_scene, simulate_scene_events, write_synthetic_eventnerf,
 };
-pub use stream::{Event, EventStream, EventWindow, StreamError};
+pub use stream::{Event, EventStream, EventWindow};
 pub use text::{read_events_text, write_events_text};
 pub use turntable::Turntable;

@@ -28,12 +28,23 @@
 //! that alignment, as BARF evaluates, and scored with PSNR and SSIM after EventNeRF's colour
 //! correction ([`ColourCorrection`]).
 //!
-//! Outputs: `metrics.json` (`{condition: {method: {…}}}`), `traj_gt.txt` and
-//! `traj_<condition>_<method>.txt` (TUM, at the evaluation times), `trajectory_<condition>_<method>.png`,
-//! `view_<k>_<condition>_<method>.png` (corrected render | truth), `depth_<k>_…png`,
-//! `own_view_<condition>_<method>.png` (the first held-out view from the method's own camera
-//! at that time | truth),
-//! `checkpoint_<condition>_<method>.bin`.
+//! The run is a study ([`cpose_core::study`]): one unit per condition (`K<k>`, e.g. `K20`, or
+//! `offset<deg>deg`, e.g. `offset1.5deg`) and method, run one after the other. Every 100 steps
+//! (`[run] report_every`) a unit reports the mean event loss of its last 100 steps and its
+//! current rotation (°) and translation error at the evaluation times; every
+//! `[run] checkpoint_secs` it saves its whole training state (field and pose correction with
+//! their Adam moments, the random generator, the recent losses), from which
+//! `cpose run --resume` continues exactly.
+//!
+//! Outputs, besides the study's (`metrics.json` as `{condition: {method: {rot_err_deg,
+//! trans_err, …, psnr_db, ssim, final_loss, wall_s}}}`, `curves.csv`, `units/`):
+//! - `traj_gt.txt`: the truth at the evaluation times (TUM);
+//! - `traj_<condition>_<method>.txt`: the method's path there (TUM);
+//! - `trajectory_<condition>_<method>.png`: truth, initial and learnt path seen from above;
+//! - `view_<k>_<condition>_<method>.png`: held-out view `k` rendered and colour-corrected,
+//!   beside the truth; `depth_<k>_<condition>_<method>.png`: its depth;
+//! - `own_view_<condition>_<method>.png`: the first held-out view from the method's own camera
+//!   at that time, beside the truth.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -43,16 +54,17 @@ use anyhow::{Context, bail};
 use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
+use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{PoseField, PoseNetConfig, TimeRange};
 use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::{Image, psnr};
 use cpose_nerf::metrics::ssim;
-use cpose_nerf::nerf::eval::{depth_image, trajectory_plot};
 use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
-use cpose_nerf::nerf::render::{Clip, RenderSettings, Renderer, render_view_with};
+use cpose_nerf::render::{
+    Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view_with,
+};
 use cpose_nerf::scene::SyntheticScene;
-use cpose_nerf::volume::{LastInterval, Sampling};
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
@@ -239,8 +251,6 @@ struct TrainConfig {
     anchor_weight: f64,
     /// Share of the windows with one end at a known view.
     anchor_windows: f64,
-    checkpoint_every: usize,
-    log_every: usize,
 }
 
 impl Default for TrainConfig {
@@ -263,8 +273,6 @@ impl Default for TrainConfig {
             pose_warmup: 0.1,
             anchor_weight: 1.0,
             anchor_windows: 0.0,
-            checkpoint_every: 1000,
-            log_every: 500,
         }
     }
 }
@@ -409,7 +417,7 @@ fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition
                 let poses: Vec<_> = times.iter().map(|&t| rec.truth.at(t)).collect();
                 let anchors = times.iter().copied().zip(poses.iter().copied()).collect();
                 out.push(Condition {
-                    name: format!("K={k}"),
+                    name: format!("K{k}"),
                     initial: InitialPath::Keyed(KeyedPoses::new(times, poses)?),
                     anchors,
                 });
@@ -432,20 +440,23 @@ fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition
                     ..truth.clone()
                 };
                 out.push(Condition {
-                    name: format!("offset={deg}deg"),
+                    name: format!("offset{deg}deg"),
                     initial: InitialPath::Turntable(nominal),
                     anchors: Vec::new(),
                 });
             }
         }
     }
+    // A repeated entry is one condition.
+    let mut seen = std::collections::BTreeSet::new();
+    out.retain(|c| seen.insert(c.name.clone()));
     if out.is_empty() {
         bail!("[experiment]: no conditions (known_poses or axis_offsets_deg is empty)");
     }
     Ok(out)
 }
 
-/// One method's results, as in `metrics.json`.
+/// One unit's results, as in `metrics.json` (the study adds `wall_s` and `cpu_s`).
 #[derive(Debug, Serialize)]
 struct MethodResult {
     /// Mean rotation / translation error against the truth at the evaluation times.
@@ -462,7 +473,6 @@ struct MethodResult {
     /// Mean event loss of the last 100 steps.
     final_loss: f64,
     iterations: usize,
-    wall_s: f64,
 }
 
 fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
@@ -478,7 +488,7 @@ fn posenet(input: &TaskInput, range: TimeRange) -> anyhow::Result<Box<dyn PoseFi
     Ok(Box::new(config.init::<f32>(range)?))
 }
 
-/// Everything the methods share in one run.
+/// Everything the units share.
 struct Setup<'a> {
     input: &'a TaskInput<'a>,
     exp: &'a Experiment,
@@ -538,6 +548,15 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             train.pose_warmup
         );
     }
+    let mut methods: Vec<Method> = Vec::new();
+    for &m in &train.methods {
+        if !methods.contains(&m) {
+            methods.push(m);
+        }
+    }
+    if methods.is_empty() {
+        bail!("[train] methods: no methods to run");
+    }
     let started = Instant::now();
     let rec = match exp.data.source {
         Source::Synthetic => synthetic_recording(&exp)?,
@@ -556,7 +575,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         started.elapsed().as_secs_f64(),
         rec.scene.held_out.len(),
         conditions.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(),
-        train.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
+        methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
         iterations,
         train.rays_per_step,
         train.windows_per_step,
@@ -579,7 +598,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         .map(|i| (i as f64 + 0.5) * rec.duration / samples as f64)
         .collect();
     let truth: Vec<_> = eval_times.iter().map(|&t| rec.truth.at(t)).collect();
-    write_trajectory(input, "traj_gt.txt", &eval_times, &truth)?;
+    write_trajectory(input.run_dir.file("traj_gt.txt"), &eval_times, &truth)?;
     let setup = Setup {
         input,
         exp: &exp,
@@ -594,26 +613,45 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         truth,
     };
 
-    let mut results: BTreeMap<String, BTreeMap<&str, MethodResult>> = BTreeMap::new();
-    for condition in &conditions {
-        for &method in &train.methods {
-            let result = run_method(&setup, condition, method)?;
-            results
-                .entry(condition.name.clone())
-                .or_default()
-                .insert(method.key(), result);
-            // Write as we go so a long run keeps what is done.
-            input.run_dir.write_json("metrics.json", &results)?;
-        }
-    }
+    // One unit per condition and method, all with the run's seed.
+    let names: Vec<&str> = conditions.iter().map(|c| c.name.as_str()).collect();
+    let keys: Vec<&str> = methods.iter().map(|m| m.key()).collect();
+    let units = UnitKey::grid(&names, &keys, &[input.run.seed]);
+    Study::new(input, units)
+        .columns(&[
+            "rot_err_deg",
+            "trans_err",
+            "rot_err_deg_aligned",
+            "trans_err_aligned",
+            "psnr_db",
+            "ssim",
+            "final_loss",
+        ])
+        .report_every(100)
+        .run(|unit| {
+            let condition = conditions
+                .iter()
+                .find(|c| c.name == unit.key().condition)
+                .context("a condition of the config")?;
+            let method = *methods
+                .iter()
+                .find(|m| m.key() == unit.key().method)
+                .context("a method of the config")?;
+            Metrics::from_serialize(&run_method(&setup, condition, method, unit)?)
+        })?;
     Ok(())
 }
 
-/// Trains one method in one condition and evaluates it.
+/// Losses kept for the running mean (live reports, `final_loss`).
+const RECENT: usize = 100;
+
+/// Trains one method in one condition, reporting and checkpointing through `unit`, and
+/// evaluates it.
 fn run_method(
     setup: &Setup<'_>,
     condition: &Condition,
     method: Method,
+    unit: &mut Unit,
 ) -> anyhow::Result<MethodResult> {
     let Setup {
         input,
@@ -623,8 +661,6 @@ fn run_method(
         ..
     } = *setup;
     let train = &exp.train;
-    let started = Instant::now();
-    let tag = format!("{}_{}", condition.name, method.key());
     let mut field = setup.field.init::<f32>(setup.bounds)?;
     let initial = if method == Method::TruePoses {
         rec.truth.clone()
@@ -666,8 +702,6 @@ fn run_method(
         anchor_windows: train.anchor_windows,
         seed: input.run.seed,
     };
-    let checkpoint = input.run_dir.file(format!("checkpoint_{tag}.bin"));
-    let progress = input.progress(iterations as u64, tag.clone());
     let mut trainer = EventTrainer::new(
         field.as_mut(),
         &mut poses,
@@ -680,40 +714,46 @@ fn run_method(
     )
     .context("[train]")?
     .with_distortion(rec.scene.distortion);
-    // The last 100 losses, a ring.
-    let mut recent = [0.0f64; 100];
-    let mut saved = None;
-    for it in 0..iterations {
-        let stats = trainer.step(it as u64).with_context(|| {
-            format!(
-                "{tag}: training stopped ({})",
-                saved.map_or("no checkpoint yet".to_owned(), |s| format!(
-                    "last good checkpoint: {}, after {s} steps",
-                    checkpoint.display()
-                ))
-            )
-        })?;
-        recent[it % recent.len()] = stats.loss;
-        progress.inc(1);
-        if train.checkpoint_every > 0 && (it + 1) % train.checkpoint_every == 0 {
-            trainer.save_checkpoint(&checkpoint, it as u64 + 1)?;
-            saved = Some(it + 1);
+    unit.set_steps(iterations);
+    // The last `RECENT` losses, a ring.
+    let mut recent = vec![0.0f64; RECENT];
+    let mut first = 0;
+    if let Some((done, mut r)) = unit.resume() {
+        trainer.read_state(&mut r)?;
+        recent = r.f64s()?;
+        if recent.len() != RECENT {
+            bail!("{}: corrupt loss history", r.path().display());
         }
-        if train.log_every > 0 && (it + 1) % train.log_every == 0 {
-            let n = (it + 1).min(recent.len());
-            let progress = (it + 1) as f64 / iterations as f64;
-            let path = trainer.path_at(&setup.eval_times, progress)?;
+        first = done as usize;
+    }
+    let mean_loss = |recent: &[f64], done: usize| {
+        let n = done.clamp(1, RECENT);
+        recent[..n].iter().sum::<f64>() / n as f64
+    };
+    for it in first..iterations {
+        let stats = trainer.step(it as u64).context("training stopped")?;
+        recent[it % RECENT] = stats.loss;
+        let done = it + 1;
+        if unit.report_due(done) {
+            let path = trainer.path_at(&setup.eval_times, done as f64 / iterations as f64)?;
             let (rot, trans, _) = pose_errors(&setup.truth, &path);
-            input.run_dir.log(format_args!(
-                "{tag} {}/{iterations}: event loss {:.5}, anchor {:.2e}, {} events in the last step's windows; rotation {rot:.3}°, translation {trans:.4}",
-                it + 1,
-                recent.iter().take(n).sum::<f64>() / n as f64,
-                stats.anchor,
-                stats.events,
-            ));
+            unit.report(
+                done,
+                &[
+                    ("loss", mean_loss(&recent, done)),
+                    ("rot_err_deg", rot),
+                    ("trans_err", trans),
+                ],
+            );
+        }
+        if done < iterations && unit.checkpoint_due() {
+            unit.checkpoint(done as u64, |w| {
+                trainer.write_state(w);
+                w.f64s(&recent);
+                Ok(())
+            })?;
         }
     }
-    progress.finish();
     let estimate = trainer.path_at(&setup.eval_times, 1.0)?;
     // The method's own camera at the first held-out view's time.
     let own_pose = match rec.scene.held_out.first().and_then(|v| v.time) {
@@ -721,47 +761,22 @@ fn run_method(
         None => None,
     };
     drop(trainer);
-    let wall_s = started.elapsed().as_secs_f64();
     let init: Vec<_> = setup.eval_times.iter().map(|&t| initial.at(t)).collect();
-    let n = iterations.clamp(1, recent.len());
-    let result = evaluate(
+    evaluate(
         setup,
-        &tag,
+        unit,
         field.as_mut(),
         Paths {
             estimate: &estimate,
             init: &init,
             own_pose,
         },
-        recent[..n].iter().sum::<f64>() / n as f64,
-        wall_s,
-    )?;
-    input.run_dir.log(format_args!(
-        "{tag}: rotation {:.3}°, translation {:.4} (max {:.4}); aligned {:.3}°, {:.4}; PSNR {}, SSIM {}, {:.0} s",
-        result.rot_err_deg,
-        result.trans_err,
-        result.max_trans_err,
-        result.rot_err_deg_aligned,
-        result.trans_err_aligned,
-        result
-            .psnr_db
-            .map_or("-".to_owned(), |p| format!("{p:.2} dB")),
-        result.ssim.map_or("-".to_owned(), |s| format!("{s:.3}")),
-        result.wall_s,
-    ));
-    Ok(result)
+        mean_loss(&recent, iterations),
+    )
 }
 
-fn write_trajectory(
-    input: &TaskInput,
-    name: &str,
-    times: &[f64],
-    poses: &[Isometry3<f64>],
-) -> anyhow::Result<()> {
-    write_tum(
-        input.run_dir.file(name),
-        &Trajectory::new(times.to_vec(), poses.to_vec())?,
-    )?;
+fn write_trajectory(path: PathBuf, times: &[f64], poses: &[Isometry3<f64>]) -> anyhow::Result<()> {
+    write_tum(path, &Trajectory::new(times.to_vec(), poses.to_vec())?)?;
     Ok(())
 }
 
@@ -786,16 +801,15 @@ struct Paths<'a> {
     own_pose: Option<Isometry3<f64>>,
 }
 
+/// Scores a trained unit and writes its files.
 fn evaluate(
     setup: &Setup<'_>,
-    tag: &str,
+    unit: &Unit,
     field: &mut dyn RadianceField,
     paths: Paths<'_>,
     final_loss: f64,
-    wall_s: f64,
 ) -> anyhow::Result<MethodResult> {
     let Setup {
-        input,
         exp,
         rec,
         settings,
@@ -810,9 +824,22 @@ fn evaluate(
     } = paths;
     let (rot_err_deg, trans_err, max_trans_err) = pose_errors(truth, estimate);
     let aligned = barf_pose_errors(truth, estimate, ReflectionFix::Kabsch)?;
-    write_trajectory(input, &format!("traj_{tag}.txt"), times, estimate)?;
-    trajectory_plot(480, truth, init, estimate)
-        .save_png(input.run_dir.file(format!("trajectory_{tag}.png")))?;
+    write_trajectory(unit.file("traj", "txt"), times, estimate)?;
+    let key = unit.key();
+    let title = format!(
+        "events, {} / {}: camera path against the truth; mean rotation error {rot_err_deg:.2}°",
+        key.condition, key.method
+    );
+    if let Err(e) = cpose_core::plot::trajectory_comparison(
+        unit.file("trajectory", "png"),
+        &title,
+        times,
+        Some(truth),
+        Some(("initial poses", init)),
+        (key.method.as_str(), estimate),
+    ) {
+        unit.log(format_args!("no trajectory plot: {e}"));
+    }
 
     let held_out = &rec.scene.held_out;
     let (mut psnr_db, mut ssim_mean) = (None, None);
@@ -847,9 +874,9 @@ fn evaluate(
                 let (w, h) = (truth.width(), truth.height());
                 corrected
                     .beside(truth)
-                    .save_png(input.run_dir.file(format!("view_{k}_{tag}.png")))?;
+                    .save_png(unit.file(&format!("view_{k}"), "png"))?;
                 depth_image(w, h, &render.depth, &render.opacity, near, far)
-                    .save_png(input.run_dir.file(format!("depth_{k}_{tag}.png")))?;
+                    .save_png(unit.file(&format!("depth_{k}"), "png"))?;
             }
         }
         if let Some(pose) = own_pose {
@@ -859,7 +886,7 @@ fn evaluate(
             correction
                 .apply(&view.image)
                 .beside(&truths[0])
-                .save_png(input.run_dir.file(format!("own_view_{tag}.png")))?;
+                .save_png(unit.file("own_view", "png"))?;
         }
         let n = held_out.len() as f64;
         psnr_db = Some(p / n);
@@ -875,6 +902,5 @@ fn evaluate(
         ssim: ssim_mean,
         final_loss,
         iterations,
-        wall_s,
     })
 }

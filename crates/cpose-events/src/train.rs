@@ -28,12 +28,12 @@ use std::collections::BTreeMap;
 
 use anyhow::bail;
 use cpose_core::Timestamp;
+use cpose_core::checkpoint::{Reader, Writer};
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
 use cpose_nerf::field3d::RadianceField;
 use cpose_nerf::nerf::poses::FramePoses;
-use cpose_nerf::nerf::render::{CameraRay, RenderSettings, Renderer};
 use cpose_nerf::nerf::train::FieldOptimizer;
-use cpose_nerf::volume::Composited;
+use cpose_nerf::render::{CameraRay, Composited, RenderSettings, Renderer};
 use nalgebra::{Isometry3, Quaternion, Translation3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -489,13 +489,33 @@ impl<'a> EventTrainer<'a> {
         })
     }
 
-    /// The field's and the correction's parameters to `path` after `iterations` steps.
-    pub fn save_checkpoint(&self, path: &std::path::Path, iterations: u64) -> anyhow::Result<()> {
-        let mut w = cpose_core::checkpoint::Writer::new();
-        w.u64(iterations);
+    /// Writes the training state to a checkpoint: the field's parameters and their optimiser,
+    /// the pose correction and its optimiser, and the random generator (the step count is the
+    /// caller's).
+    pub fn write_state(&self, w: &mut Writer) {
         w.f32s(self.field.params());
-        w.f32s(&self.poses.params());
-        w.save(path)
+        w.adam(self.optimizer.adam());
+        self.poses.write_state(w);
+        w.rng(&self.rng);
+    }
+
+    /// Restores what [`EventTrainer::write_state`] wrote, into a trainer of the same setup; the
+    /// next step continues exactly where the saved run stopped.
+    pub fn read_state(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        let params = r.f32s()?;
+        if params.len() != self.field.num_params() {
+            bail!(
+                "{}: the checkpoint's field has {} parameters, this one {}",
+                r.path().display(),
+                params.len(),
+                self.field.num_params()
+            );
+        }
+        self.field.params_mut().copy_from_slice(&params);
+        r.adam(self.optimizer.adam_mut())?;
+        self.poses.read_state(r)?;
+        self.rng = r.rng()?;
+        Ok(())
     }
 }
 
@@ -522,16 +542,16 @@ mod tests {
     fn settings() -> RenderSettings {
         RenderSettings {
             samples: 24,
-            sampling: cpose_nerf::volume::Sampling::Metric {
+            sampling: cpose_nerf::render::Sampling::Metric {
                 near: 1.0,
                 far: 9.0,
             },
             background: Some([1.0; 3]),
-            clip: Some(cpose_nerf::nerf::render::Clip {
+            clip: Some(cpose_nerf::render::Clip {
                 centre: [0.0; 3],
                 radius: 1.8,
             }),
-            last_interval: cpose_nerf::volume::LastInterval::Closed,
+            last_interval: cpose_nerf::render::LastInterval::Closed,
         }
     }
 
@@ -650,6 +670,76 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A trainer restored from a checkpoint after 3 steps takes the same next steps as the one
+    /// that went on: field, optimisers, PoseNet and the random draws all continue.
+    #[test]
+    fn a_restored_trainer_continues_exactly() {
+        let (data, tt) = tiny();
+        let anchors: Vec<_> = [0.0, 5.0, 10.0]
+            .iter()
+            .map(|&t| (t, tt.world_from_camera(t)))
+            .collect();
+        let initial = InitialPath::Turntable(tt);
+        let posenet = || {
+            let config = cpose_core::PoseNetConfig {
+                width: 16,
+                ..Default::default()
+            };
+            let range = cpose_core::TimeRange::new(0.0, 10.0).unwrap();
+            let decay = ExponentialDecay {
+                lr0: 1e-3,
+                lr_end: 1e-4,
+                max_iter: 6,
+            };
+            let schedules = cpose_nerf::nerf::poses::PoseSchedules {
+                rotation: decay,
+                translation: decay,
+                pose: decay,
+                warmup: 0,
+                rotation_warmup: 0,
+            };
+            let field: Box<dyn cpose_core::PoseField> =
+                Box::new(config.init::<f32>(range).unwrap());
+            FramePoses::new(Vec::new(), Vec::new(), Some(field), schedules)
+        };
+        let mut s = schedule(6);
+        s.anchor_windows = 0.5;
+        let run = |restore: Option<&[u8]>, from: u64| {
+            let (mut field, mut poses) = (field(), posenet());
+            let mut trainer = EventTrainer::new(
+                field.as_mut(),
+                &mut poses,
+                &initial,
+                anchors.clone(),
+                &data.events,
+                data.camera,
+                settings(),
+                s.clone(),
+            )
+            .unwrap();
+            if let Some(bytes) = restore {
+                let path = std::path::Path::new("state.bin");
+                let mut r = Reader::from_bytes(path, bytes.to_vec()).unwrap();
+                trainer.read_state(&mut r).unwrap();
+            }
+            let mut losses = Vec::new();
+            let mut saved = None;
+            for it in from..6 {
+                losses.push(trainer.step(it).unwrap().loss);
+                if it == 2 {
+                    let mut w = Writer::new();
+                    trainer.write_state(&mut w);
+                    saved = Some(w.into_bytes());
+                }
+            }
+            (losses, saved, trainer.path_at(&[2.5, 7.5], 1.0).unwrap())
+        };
+        let (whole, saved, path) = run(None, 0);
+        let (rest, _, resumed_path) = run(saved.as_deref(), 3);
+        assert_eq!(rest, whole[3..]);
+        assert_eq!(resumed_path, path);
     }
 
     #[test]

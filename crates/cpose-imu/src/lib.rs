@@ -1,10 +1,12 @@
-//! cpose-imu: IMU samples, the EuRoC reader, IMU losses through a pose field's time derivatives;
-//! tasks `trajectory` (fit a pose field to poses and IMU) and `slam_imu`.
+//! cpose-imu: IMU samples, the EuRoC reader, IMU losses through a pose field's time derivatives,
+//! the IMU's motion over a frame interval as a tie on `cpose-slam`'s relative tracker
+//! ([`increment`]); tasks `trajectory` (fit a pose field to poses and IMU) and `slam_imu`.
 
 use std::path::{Path, PathBuf};
 
 pub mod euroc;
 pub mod imu;
+pub mod increment;
 pub mod losses;
 pub mod sim;
 mod slam_imu;

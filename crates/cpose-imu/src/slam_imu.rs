@@ -394,7 +394,6 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         exp.mapping.clone(),
         &exp.bounds,
         &exp.mesh,
-        exp.slam.checkpoint_every,
     )?;
     let data = match &exp.euroc {
         Some(euroc) => euroc_room(euroc, &exp.data, &exp.synthetic, input)?,

@@ -53,7 +53,7 @@ use cpose_core::checkpoint::{Reader, Writer};
 use cpose_core::nn::Adam;
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, PoseNetConfig, TimeRange};
 use cpose_slam::track::{
-    MotionIncrement, NetworkObjective, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference,
+    NetworkObjective, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference,
 };
 use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 use rand::SeedableRng;
@@ -62,6 +62,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::imu::{ImuMode, ImuSample};
+use crate::increment::MotionIncrement;
 use crate::losses;
 
 /// IMU coupling in tracking; `[imu]` in a `slam_imu` config.
@@ -70,8 +71,8 @@ use crate::losses;
 pub struct ImuTrackConfig {
     /// Weight `λ_g` of the gyroscope loss (loose or tight) against the tracking loss per pixel.
     /// Tight's residual is a rate: over a frame interval `Δ` a rotation error `δ` costs about
-    /// `λ_g δ/Δ` there and `λ_g δ` in loose's. In windows on EuRoC V1_02 at 10 Hz, 0.1 carried
-    /// the network through the fast stretch where the paper's 1 lost it (README).
+    /// `λ_g δ/Δ` there and `λ_g δ` in loose's; the windowed setting's weight is chosen in
+    /// `docs/results/imu.md`.
     pub gyro_weight: f64,
     /// Weight `λ_a` of the accelerometer's tie in the relative family ([`RelativeImu`]); the
     /// absolute network's start takes the accelerometer's position as it is.
@@ -864,7 +865,7 @@ impl PoseModel for RelativeImu {
                 _ => None,
             };
             let loose = matches!(self.mode, ImuMode::Loose | ImuMode::Combined);
-            self.tracker.set_increment(Some(MotionIncrement {
+            let increment = MotionIncrement {
                 rotation,
                 rotation_weight: if loose {
                     self.config.gyro_weight * self.pixels
@@ -872,8 +873,9 @@ impl PoseModel for RelativeImu {
                     0.0
                 },
                 translation,
-                predict_steps: self.config.predict_steps,
-            }));
+            };
+            self.tracker
+                .set_relative_term(Some(increment.term()), self.config.predict_steps);
         }
         let terms = self.increment_terms(index, time, history)?;
         self.tracker.set_objective(terms, self.config.predict_steps);

@@ -20,11 +20,9 @@ use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{HashGridConfig, NerfMlpConfig, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::Image;
 use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
-use cpose_nerf::nerf::render::{Clip, RenderSettings};
 use cpose_nerf::nerf::train::{Schedule, Trainer};
+use cpose_nerf::render::{Clip, LastInterval, RenderSettings, Sampling};
 use cpose_nerf::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
-use cpose_nerf::volume::LastInterval;
-use cpose_nerf::volume::Sampling;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 
 const ITERATIONS: u64 = 6000;

@@ -1,5 +1,6 @@
-//! Pieces shared by the 2-D and 3-D neural fields: config validation, BARF's coarse-to-fine
-//! weights, the `[start, end]`-or-`false` serde of a coarse-to-fine window and buffer growth.
+//! Pieces shared by the 2-D and 3-D neural fields: config validation, the coarse-to-fine window
+//! (its `[start, end]`-or-`false` serde, and `None` as the window that switches every band on)
+//! and buffer growth.
 
 use std::fmt;
 
@@ -43,19 +44,11 @@ pub(crate) fn check_c2f(c2f: Option<[f64; 2]>) -> Result<(), Invalid> {
     }
 }
 
-/// BARF's coarse-to-fine weights over `F = weights.len()` bands (or levels):
-/// `α = (progress − start)/(end − start) · F`, `w_k = (1 − cos(π · clamp(α − k, 0, 1)))/2`;
-/// all 1 when `c2f` is `None`.
-pub(crate) fn coarse_to_fine_weights(progress: f64, c2f: Option<[f64; 2]>, weights: &mut [f64]) {
-    let Some([start, end]) = c2f else {
-        weights.fill(1.0);
-        return;
-    };
-    let alpha = (progress - start) / (end - start) * weights.len() as f64;
-    for (k, w) in weights.iter_mut().enumerate() {
-        let a = (alpha - k as f64).clamp(0.0, 1.0);
-        *w = (1.0 - (std::f64::consts::PI * a).cos()) / 2.0;
-    }
+/// The `[start, end]` of an optional coarse-to-fine window for
+/// [`cpose_core::nn::coarse_to_fine_weights`]: `None` is the empty window `[1, 0]`, every band
+/// (or level) fully on.
+pub(crate) fn c2f_window(c2f: Option<[f64; 2]>) -> [f64; 2] {
+    c2f.unwrap_or([1.0, 0.0])
 }
 
 /// Grows `v` to at least `n` entries (never shrinks, so buffers are reused).
@@ -125,23 +118,7 @@ pub(crate) mod c2f_serde {
 
 #[cfg(test)]
 mod tests {
-    use cpose_core::nn::{Embedding, Encoding};
-
     use super::*;
-
-    /// The level weights use the same schedule as the embedding's band weights.
-    #[test]
-    fn coarse_to_fine_weights_match_the_embedding_schedule() {
-        let mut e = Embedding::new(Encoding::Sinusoidal, 2, 6);
-        let mut w = [0.0; 6];
-        for progress in [0.0, 0.05, 0.13, 0.3, 0.41, 0.9] {
-            e.set_coarse_to_fine(progress, 0.05, 0.45);
-            coarse_to_fine_weights(progress, Some([0.05, 0.45]), &mut w);
-            assert_eq!(w, e.weights());
-        }
-        coarse_to_fine_weights(0.0, None, &mut w);
-        assert!(w.iter().all(|&w| w == 1.0));
-    }
 
     #[test]
     fn c2f_window_is_validated() {

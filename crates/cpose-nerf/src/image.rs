@@ -15,70 +15,11 @@
 //! * **Normalised coordinates** (BARF, `model/planar.py`): the long side spans `[−1, 1]`, the
 //!   short side `[−S/L, S/L]`, the origin is the image centre; see [`NormalizedFrame`].
 
-use std::io;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use ::image::ImageEncoder as _;
 
-/// Errors from reading, writing and constructing [`Image`]s.
-#[derive(Debug, thiserror::Error)]
-pub enum ImageError {
-    /// The file could not be read (missing, a folder, no permission …).
-    #[error("cannot read image {} (expected a readable PNG or JPEG file): {error}", .path.display())]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// The underlying error.
-        error: io::Error,
-    },
-    /// The file's bytes are neither PNG nor JPEG.
-    #[error("image {}: expected PNG or JPEG data, got {found}", .path.display())]
-    UnsupportedFormat {
-        /// The file.
-        path: PathBuf,
-        /// What the data looks like (a format name, or "unrecognised data").
-        found: String,
-    },
-    /// The file starts like a PNG or JPEG but cannot be decoded.
-    #[error("image {}: expected valid {format} data, got a decoding error: {error}", .path.display())]
-    Decode {
-        /// The file.
-        path: PathBuf,
-        /// "PNG" or "JPEG".
-        format: &'static str,
-        /// The decoder's error.
-        error: ::image::ImageError,
-    },
-    /// Encoding the PNG in memory failed.
-    #[error("cannot encode PNG for {}: {error}", .path.display())]
-    Encode {
-        /// The file that was to be written.
-        path: PathBuf,
-        /// The encoder's error.
-        error: ::image::ImageError,
-    },
-    /// Writing the encoded file failed.
-    #[error("cannot write image {}: {error}", .path.display())]
-    Write {
-        /// The file.
-        path: PathBuf,
-        /// The underlying error.
-        error: io::Error,
-    },
-    /// Width, height and data length do not describe an RGB image.
-    #[error(
-        "expected 1 ≤ width, height ≤ {max} and 3·width·height values, got {width}×{height} with {len} values",
-        max = u32::MAX
-    )]
-    Shape {
-        /// Requested width.
-        width: usize,
-        /// Requested height.
-        height: usize,
-        /// Length of the data given.
-        len: usize,
-    },
-}
+use crate::DataError;
 
 /// An RGB image, `f32` values nominally in `[0, 1]`, stored interleaved and row-major:
 /// the red value of pixel `(x, y)` is `data[3·(y·width + x)]`.
@@ -94,9 +35,9 @@ pub struct Image {
 impl Image {
     /// An image from interleaved row-major RGB data (see [`Image`]).
     ///
-    /// Errors with [`ImageError::Shape`] unless `1 ≤ width, height ≤ u32::MAX` and
+    /// Errors with [`DataError::ImageShape`] unless `1 ≤ width, height ≤ u32::MAX` and
     /// `data.len() == 3·width·height`.
-    pub fn new(width: usize, height: usize, data: Vec<f32>) -> Result<Image, ImageError> {
+    pub fn new(width: usize, height: usize, data: Vec<f32>) -> Result<Image, DataError> {
         let fits = |n: usize| n >= 1 && u32::try_from(n).is_ok();
         let expected = width.checked_mul(height).and_then(|n| n.checked_mul(3));
         if fits(width) && fits(height) && expected == Some(data.len()) {
@@ -106,7 +47,7 @@ impl Image {
                 data,
             })
         } else {
-            Err(ImageError::Shape {
+            Err(DataError::ImageShape {
                 width,
                 height,
                 len: data.len(),
@@ -197,9 +138,9 @@ impl Image {
     /// Grey, grey+alpha, RGBA and 16-bit images are converted to RGB in `[0, 1]` (alpha dropped,
     /// 8-bit values divided by 255, 16-bit by 65535).
     ///
-    /// Errors name the file: [`ImageError::Read`] (missing or unreadable),
-    /// [`ImageError::UnsupportedFormat`] (neither PNG nor JPEG), [`ImageError::Decode`] (corrupt).
-    pub fn load(path: impl AsRef<Path>) -> Result<Image, ImageError> {
+    /// Errors name the file: [`DataError::ImageRead`] (missing or unreadable),
+    /// [`DataError::ImageUnsupported`] (neither PNG nor JPEG), [`DataError::ImageDecode`] (corrupt).
+    pub fn load(path: impl AsRef<Path>) -> Result<Image, DataError> {
         let rgb = decode(path.as_ref())?.into_rgb32f();
         let (width, height) = (rgb.width() as usize, rgb.height() as usize);
         Image::new(width, height, rgb.into_raw())
@@ -212,7 +153,7 @@ impl Image {
     pub fn load_rgba_over(
         path: impl AsRef<Path>,
         background: [f32; 3],
-    ) -> Result<Image, ImageError> {
+    ) -> Result<Image, DataError> {
         let rgba = decode(path.as_ref())?.into_rgba32f();
         let (width, height) = (rgba.width() as usize, rgba.height() as usize);
         let data = rgba
@@ -229,7 +170,7 @@ impl Image {
     /// Saves as an 8-bit RGB PNG, atomically ([`cpose_core::fs::write_atomic`]): the file is
     /// encoded in memory, written to `<path>.tmp` and renamed. Each value is stored as
     /// `round(255·clamp(v, 0, 1))` (NaN becomes 0).
-    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), ImageError> {
+    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), DataError> {
         let path = path.as_ref();
         let bytes: Vec<u8> = self
             .data
@@ -240,11 +181,11 @@ impl Image {
         let (w, h) = self.size_u32();
         ::image::codecs::png::PngEncoder::new(&mut png)
             .write_image(&bytes, w, h, ::image::ExtendedColorType::Rgb8)
-            .map_err(|error| ImageError::Encode {
+            .map_err(|error| DataError::ImageEncode {
                 path: path.to_path_buf(),
                 error,
             })?;
-        cpose_core::fs::write_atomic(path, &png).map_err(|error| ImageError::Write {
+        cpose_core::fs::write_atomic(path, &png).map_err(|error| DataError::ImageWrite {
             path: path.to_path_buf(),
             error,
         })
@@ -682,21 +623,21 @@ fn unit_f64(h: u64) -> f64 {
 
 /// Reads and decodes a PNG or JPEG file (format detected from the bytes), with errors naming
 /// the file (see [`Image::load`]).
-fn decode(path: &Path) -> Result<::image::DynamicImage, ImageError> {
-    let bytes = std::fs::read(path).map_err(|error| ImageError::Read {
+fn decode(path: &Path) -> Result<::image::DynamicImage, DataError> {
+    let bytes = std::fs::read(path).map_err(|error| DataError::ImageRead {
         path: path.to_path_buf(),
         error,
     })?;
     let format = match ::image::guess_format(&bytes) {
         Ok(f @ (::image::ImageFormat::Png | ::image::ImageFormat::Jpeg)) => f,
         Ok(other) => {
-            return Err(ImageError::UnsupportedFormat {
+            return Err(DataError::ImageUnsupported {
                 path: path.to_path_buf(),
                 found: format!("{other:?} data"),
             });
         }
         Err(_) => {
-            return Err(ImageError::UnsupportedFormat {
+            return Err(DataError::ImageUnsupported {
                 path: path.to_path_buf(),
                 found: "unrecognised data".to_owned(),
             });
@@ -708,7 +649,7 @@ fn decode(path: &Path) -> Result<::image::DynamicImage, ImageError> {
         "JPEG"
     };
     let decoded = ::image::load_from_memory_with_format(&bytes, format).map_err(|error| {
-        ImageError::Decode {
+        DataError::ImageDecode {
             path: path.to_path_buf(),
             format: format_name,
             error,
@@ -731,11 +672,11 @@ mod tests {
         assert_eq!(img.pixel(1, 0), [0.4, 0.5, 0.6]);
         assert!(matches!(
             Image::new(2, 2, vec![0.0; 6]),
-            Err(ImageError::Shape { .. })
+            Err(DataError::ImageShape { .. })
         ));
         assert!(matches!(
             Image::new(0, 0, vec![]),
-            Err(ImageError::Shape { .. })
+            Err(DataError::ImageShape { .. })
         ));
         let f = Image::from_fn(3, 2, |x, y| [x as f32, y as f32, 0.0]);
         assert_eq!(f.pixel(2, 1), [2.0, 1.0, 0.0]);
@@ -871,17 +812,17 @@ mod tests {
         let dir = temp_dir("errors");
         let missing = dir.join("missing.png");
         let err = Image::load(&missing).unwrap_err();
-        assert!(matches!(err, ImageError::Read { .. }));
+        assert!(matches!(err, DataError::ImageRead { .. }));
         assert!(err.to_string().contains("missing.png"), "{err}");
         assert!(matches!(
             Image::load(&dir).unwrap_err(),
-            ImageError::Read { .. }
+            DataError::ImageRead { .. }
         ));
 
         let text = dir.join("notes.png");
         std::fs::write(&text, "this is not an image").unwrap();
         let err = Image::load(&text).unwrap_err();
-        assert!(matches!(err, ImageError::UnsupportedFormat { .. }), "{err}");
+        assert!(matches!(err, DataError::ImageUnsupported { .. }), "{err}");
         assert!(
             err.to_string().contains("expected PNG or JPEG")
                 && err.to_string().contains("notes.png"),
@@ -892,7 +833,7 @@ mod tests {
         std::fs::write(&gif, b"GIF89a\x01\x00\x01\x00\x00\x00\x00;").unwrap();
         assert!(matches!(
             Image::load(&gif).unwrap_err(),
-            ImageError::UnsupportedFormat { .. }
+            DataError::ImageUnsupported { .. }
         ));
 
         let truncated = dir.join("truncated.png");
@@ -903,7 +844,7 @@ mod tests {
         std::fs::write(&truncated, &png[..png.len() / 2]).unwrap();
         let err = Image::load(&truncated).unwrap_err();
         assert!(
-            matches!(err, ImageError::Decode { format: "PNG", .. }),
+            matches!(err, DataError::ImageDecode { format: "PNG", .. }),
             "{err}"
         );
     }

@@ -1,6 +1,7 @@
 //! cpose-nerf: the neural-field base of cpose — cameras and rays, radiance fields, volume
-//! rendering with analytic backward, image metrics and a synthetic scene renderer; tasks
-//! `planar` (2-D image alignment) and `nerf` (NeRF from noisy or unknown poses).
+//! rendering with analytic backward ([`render`], shared by the tasks of this crate and the
+//! crates above it), image metrics and a synthetic scene renderer; tasks `planar` (2-D image
+//! alignment) and `nerf` (NeRF from noisy or unknown poses).
 //!
 //! Built on [`cpose_core`]; the event and SLAM crates build on this one.
 
@@ -8,6 +9,7 @@ pub use cpose_core;
 
 pub mod camera;
 pub mod data;
+mod error;
 pub mod field2d;
 pub mod field3d;
 mod field_common;
@@ -16,6 +18,8 @@ pub mod mesh;
 pub mod metrics;
 pub mod nerf;
 pub mod planar;
+pub mod render;
 pub mod scene;
-pub mod volume;
 pub mod warp2d;
+
+pub use error::DataError;

@@ -19,8 +19,7 @@ use cpose_nerf::field3d::{
     HashGridConfig, HashGridField, Interpolation, RadianceField, SceneBounds,
 };
 use cpose_nerf::mesh::{Grid, Mesh};
-use cpose_nerf::nerf::render::{CameraRay, RenderSettings, Renderer};
-use cpose_nerf::volume::{Composited, LastInterval, Sampling};
+use cpose_nerf::render::{CameraRay, Composited, LastInterval, RenderSettings, Renderer, Sampling};
 use rand::RngExt;
 use serde::{Deserialize, Serialize};
 

@@ -4,7 +4,7 @@
 //! is trained over a window of keyframes plus the current frame at their estimated poses.
 
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
-use cpose_nerf::nerf::render::CameraRay;
+use cpose_nerf::render::CameraRay;
 use nalgebra::Isometry3;
 use rand::seq::SliceRandom;
 use rand::{RngExt, SeedableRng};
@@ -158,7 +158,7 @@ impl Slam {
         })
     }
 
-    /// Mounts the camera on a body (an IMU rig) at `body_from_camera`: from then on the pose
+    /// Mounts the camera on a body (a sensor rig) at `body_from_camera`: from then on the pose
     /// model tracks `world_from_body`, and frames are seen from `world_from_body ∘
     /// body_from_camera` (the estimates stay camera poses). Set it before the first frame.
     pub fn set_body_from_camera(&mut self, body_from_camera: Isometry3<f64>) {

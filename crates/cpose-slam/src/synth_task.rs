@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::Context as _;
 use cpose_core::registry::{Task, TaskInput};
+use cpose_core::study::{Metrics, Study, UnitKey};
 use serde::Deserialize;
 
 use crate::data::read_replica;
@@ -36,45 +37,43 @@ struct Output {
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let exp: Experiment = input.config.parse_params()?;
-    let started = Instant::now();
-    let progress = input.progress(exp.synthetic.frames as u64, "rendering");
-    let n = generate_room(&exp.synthetic, &exp.output.path, |i, n| {
-        progress.set_length(n as u64);
-        progress.set_position(i as u64);
-    })
-    .with_context(|| {
-        format!(
-            "writing the synthetic room to {}",
-            exp.output.path.display()
-        )
-    })?;
-    progress.finish();
-    // Read it back as any Replica scene would be, and keep a preview of frame 0.
-    let seq = read_replica(&exp.output.path, None, 1.0, exp.synthetic.frame_rate)?;
-    let frame = seq.load(0)?;
-    frame
-        .color
-        .save_png(input.run_dir.file("frame0_color.png"))?;
-    frame
-        .depth
-        .to_image(0.0, 6.0)
-        .save_png(input.run_dir.file("frame0_depth.png"))?;
-    input.run_dir.write_json(
-        "metrics.json",
-        &serde_json::json!({
-            "frames": n,
-            "width": seq.camera.width,
-            "height": seq.camera.height,
-            "path": exp.output.path,
-            "wall_s": started.elapsed().as_secs_f64(),
-        }),
-    )?;
-    input.run_dir.log(format_args!(
-        "wrote {n} frames of {}×{} to {} in {:.1} s",
-        seq.camera.width,
-        seq.camera.height,
-        exp.output.path.display(),
-        started.elapsed().as_secs_f64()
-    ));
+    // One unit: the room, written (again, on a resume that finds it unfinished) as a whole.
+    let unit = UnitKey::new("room", "synthetic", input.run.seed);
+    Study::new(input, vec![unit])
+        .columns(&["frames", "width", "height"])
+        .run(|unit| {
+            let started = Instant::now();
+            unit.set_steps(exp.synthetic.frames);
+            let n = generate_room(&exp.synthetic, &exp.output.path, |i, n| {
+                unit.set_steps(n);
+                unit.set_step(i);
+            })
+            .with_context(|| {
+                format!(
+                    "writing the synthetic room to {}",
+                    exp.output.path.display()
+                )
+            })?;
+            // Read it back as any Replica scene would be, and keep a preview of frame 0.
+            let seq = read_replica(&exp.output.path, None, 1.0, exp.synthetic.frame_rate)?;
+            let frame = seq.load(0)?;
+            frame.color.save_png(unit.file("frame0_color", "png"))?;
+            frame
+                .depth
+                .to_image(0.0, 6.0)
+                .save_png(unit.file("frame0_depth", "png"))?;
+            unit.log(format_args!(
+                "wrote {n} frames of {}×{} to {} in {:.1} s",
+                seq.camera.width,
+                seq.camera.height,
+                exp.output.path.display(),
+                started.elapsed().as_secs_f64()
+            ));
+            Ok(Metrics::new()
+                .with("frames", n)
+                .with("width", seq.camera.width)
+                .with("height", seq.camera.height)
+                .with("path", &exp.output.path))
+        })?;
     Ok(())
 }

@@ -15,11 +15,12 @@ use anyhow::{Context as _, bail};
 use cpose_core::TimeRange;
 use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, write_tum};
 use cpose_core::geometry::rotation_angle_between;
+use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
+use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_nerf::field3d::SceneBounds;
 use cpose_nerf::image::Image;
 use cpose_nerf::mesh::Grid;
-use cpose_nerf::nerf::eval::trajectory_plot;
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -34,7 +35,6 @@ use crate::track::{
     FreePose, IntrinsicConfig, IntrinsicTracker, PoseModel, PoseNetTrackConfig, PoseNetTracker,
     Reference,
 };
-use cpose_core::checkpoint::{Reader, Writer};
 
 inventory::submit! {
     Task {
@@ -207,20 +207,13 @@ impl BoundsConfig {
     }
 }
 
-/// `[slam]`: the tracking methods to run, one after the other, and the checkpoint interval.
+/// `[slam]`: the tracking methods to run, one after the other (checkpoints: `[run]
+/// checkpoint_secs`).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SlamConfig<M> {
     /// The methods, by name.
     pub methods: Vec<M>,
-    /// Write a checkpoint every this many frames (0: never); `cpose run --resume` continues
-    /// from it.
-    #[serde(default = "fifty")]
-    pub checkpoint_every: usize,
-}
-
-fn fifty() -> usize {
-    50
 }
 
 /// A tracking method and its key in `metrics.json`.
@@ -258,7 +251,6 @@ struct MethodResult {
     lost_frames: usize,
     first_lost: Option<usize>,
     fps: f64,
-    wall_s: f64,
     /// The mesh against the true surface seen in the depth images ([`crate::surface`]).
     mesh_accuracy_cm: Option<f64>,
     mesh_completion: Option<f64>,
@@ -361,7 +353,6 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         exp.mapping,
         &exp.bounds,
         &exp.mesh,
-        exp.slam.checkpoint_every,
     )?;
     let seq = open_sequence(&exp.data, &exp.synthetic, input)?.every(exp.data.stride);
     let n = exp.data.frames_of(seq.len());
@@ -420,7 +411,7 @@ pub fn frame_range(seq: &RgbdSequence, n: usize) -> anyhow::Result<TimeRange> {
 
 /// What every SLAM task shares besides its frames and pose models: the map, tracking and
 /// mapping settings (optimiser steps already scaled by `run.iterations_scale`), the map's region,
-/// the mesh grid and the checkpoint interval.
+/// and the mesh grid.
 pub struct SlamSetup {
     /// `[map]`.
     pub map: MapConfig,
@@ -432,8 +423,6 @@ pub struct SlamSetup {
     pub bounds: SceneBounds,
     /// The grid, level and culling margin of the mesh; none: no mesh.
     pub mesh: Option<(Grid, f32, f64)>,
-    /// Frames between checkpoints (0: none).
-    pub checkpoint_every: usize,
     /// The camera's mount on the tracked body (identity: the body is the camera).
     pub body_from_camera: Isometry3<f64>,
 }
@@ -448,7 +437,6 @@ impl SlamSetup {
         mut mapping: MappingConfig,
         bounds: &BoundsConfig,
         mesh: &MeshConfig,
-        checkpoint_every: usize,
     ) -> anyhow::Result<Self> {
         for steps in [
             &mut tracking.iterations,
@@ -470,27 +458,26 @@ impl SlamSetup {
             mapping,
             bounds: bounds.scene_bounds()?,
             mesh,
-            checkpoint_every,
             body_from_camera: Isometry3::identity(),
         })
     }
 }
 
 /// Builds a fresh pose model for one method's run.
-pub type ModelFactory<'a> = Box<dyn Fn() -> anyhow::Result<Box<dyn PoseModel>> + 'a>;
+pub type ModelFactory<'a> = Box<dyn Fn() -> anyhow::Result<Box<dyn PoseModel>> + Sync + 'a>;
 
-/// Runs SLAM on the first `n` frames of `seq` once per `(key, model)` method and writes, per
-/// method, `traj_<key>.txt`, `trajectory_<key>.png`, `view_<key>.png`, `mesh_<key>.ply`,
-/// `tracking_<key>.csv` (per frame) and its entry in `metrics.json` (also `traj_gt.txt`). On `--resume`, methods already in
-/// `metrics.json` are skipped and an interrupted one continues from its checkpoint. Returns
-/// the metrics.
+/// Runs SLAM on the first `n` frames of `seq` once per `(key, model)` method, each a unit of
+/// a study whose condition is the sequence's folder name, and writes per method
+/// `traj_<sequence>_<key>.txt`, `trajectory_…png`, `view_…png`, `mesh_…ply`, `tracking_…csv`
+/// (per frame) and its entry in `metrics.json` (also `traj_gt.txt`). On `--resume`, finished
+/// methods are kept and an interrupted one continues from its checkpoint.
 pub fn run_methods(
     input: &TaskInput,
     seq: &RgbdSequence,
     n: usize,
     setup: &SlamSetup,
     methods: &[(String, ModelFactory)],
-) -> anyhow::Result<BTreeMap<String, serde_json::Value>> {
+) -> anyhow::Result<()> {
     frame_range(seq, n)?;
     let times: Vec<f64> = seq.times()[..n].to_vec();
     // Ground truth: frames with a finite pose (NICE-SLAM drops the others from the ATE).
@@ -520,183 +507,188 @@ pub fn run_methods(
         methods.iter().map(|m| m.0.as_str()).collect::<Vec<_>>()
     ));
     let start = truth[0].unwrap_or_else(Isometry3::identity);
-    // On resume, methods already in metrics.json are done.
-    let metrics_path = input.run_dir.file("metrics.json");
-    let mut results: BTreeMap<String, serde_json::Value> = if input.resume {
-        std::fs::read_to_string(&metrics_path)
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok())
-            .unwrap_or_default()
-    } else {
-        BTreeMap::new()
-    };
-    for (key, factory) in methods {
-        let key = key.as_str();
-        if results.contains_key(key) {
-            input
-                .run_dir
-                .log(format_args!("{key}: finished before the resume"));
-            continue;
-        }
-        let started = Instant::now();
-        let map =
-            NeuralMap::new(&setup.map, setup.bounds).map_err(|m| anyhow::anyhow!("map: {m}"))?;
-        let mut slam = Slam::new(
-            map,
-            seq.camera,
-            &setup.tracking,
-            &setup.mapping,
-            input.run.seed,
-        )?;
-        slam.set_body_from_camera(setup.body_from_camera);
-        let mut model = factory()?;
-        let checkpoint = input.run_dir.file(format!("checkpoint_{key}.bin"));
-        let mut lost: Vec<usize> = Vec::new();
-        let (mut first, mut earlier_s) = (0, 0.0);
-        if input.resume && checkpoint.is_file() {
-            let mut r = Reader::open(&checkpoint)?;
-            first = r.u64()? as usize;
-            lost = r.f64s()?.into_iter().map(|i| i as usize).collect();
-            earlier_s = r.f64()?;
-            slam.load(&mut r, |i| Ok(seq.load(i)?))?;
-            model.load(&mut r)?;
-            input.run_dir.log(format_args!(
-                "{}: resumed after frame {first} from {}",
-                key,
-                checkpoint.display()
-            ));
-        }
-        let mut tracking_log =
-            TrackingLog::open(&input.run_dir.file(format!("tracking_{key}.csv")), first)?;
-        let progress = input.progress(n as u64, key.to_string());
-        progress.set_position(first as u64);
-        let every = setup.checkpoint_every;
-        for i in first..n {
-            let frame = seq.load(i)?;
-            let time = frame.time;
-            let report = slam.process(frame, start, model.as_mut())?;
-            if let Some(r) = &report {
-                tracking_log.row(i, time, r, &slam.estimates[i], truth[i].as_ref())?;
+    let sequence = seq.root.file_name().map_or_else(
+        || "sequence".to_owned(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    let units = methods
+        .iter()
+        .map(|(key, _)| UnitKey::new(sequence.as_str(), key.as_str(), input.run.seed))
+        .collect();
+    Study::new(input, units)
+        .report_every(100)
+        .columns(&[
+            "ate_rmse_cm",
+            "ate_max_cm",
+            "lost_frames",
+            "fps",
+            "mesh_accuracy_cm",
+        ])
+        .run(|unit| {
+            let key = unit.key().method.clone();
+            let factory = &methods
+                .iter()
+                .find(|(k, _)| *k == key)
+                .context("a method of the config")?
+                .1;
+            let map = NeuralMap::new(&setup.map, setup.bounds)
+                .map_err(|m| anyhow::anyhow!("map: {m}"))?;
+            let mut slam = Slam::new(
+                map,
+                seq.camera,
+                &setup.tracking,
+                &setup.mapping,
+                input.run.seed,
+            )?;
+            slam.set_body_from_camera(setup.body_from_camera);
+            let mut model = factory()?;
+            let mut lost: Vec<usize> = Vec::new();
+            let mut first = 0;
+            unit.set_steps(n);
+            if let Some((done, mut r)) = unit.resume() {
+                first = done as usize;
+                lost = r.f64s()?.into_iter().map(|i| i as usize).collect();
+                slam.load(&mut r, |i| Ok(seq.load(i)?))?;
+                model.load(&mut r)?;
             }
-            if let Some(r) = report
-                && r.lost
-            {
-                if lost.is_empty() {
-                    input.run_dir.log(format_args!(
-                        "{}: track lost at frame {i} (moved {:.3} m while tracking, median depth \
-                         error {:.3} m, loss {:.3})",
-                        key, r.moved, r.depth_error, r.loss
-                    ));
+            let mut tracking_log = TrackingLog::open(&unit.file("tracking", "csv"), first)?;
+            let session = Instant::now();
+            for i in first..n {
+                let frame = seq.load(i)?;
+                let time = frame.time;
+                let report = slam.process(frame, start, model.as_mut())?;
+                if let Some(r) = &report {
+                    tracking_log.row(i, time, r, &slam.estimates[i], truth[i].as_ref())?;
                 }
-                lost.push(i);
+                if let Some(r) = &report
+                    && r.lost
+                {
+                    if lost.is_empty() {
+                        unit.log(format_args!(
+                            "track lost at frame {i} (moved {:.3} m while tracking, median depth \
+                             error {:.3} m, loss {:.3})",
+                            r.moved, r.depth_error, r.loss
+                        ));
+                    }
+                    lost.push(i);
+                }
+                let done = i + 1;
+                if unit.report_due(done) {
+                    let err_cm = truth[i].map_or(f64::NAN, |t| {
+                        100.0 * (t.translation.vector - slam.estimates[i].translation.vector).norm()
+                    });
+                    let fps = (done - first) as f64 / session.elapsed().as_secs_f64();
+                    let loss = report.as_ref().map_or(f64::NAN, |r| r.loss);
+                    unit.report(
+                        done,
+                        &[("loss", loss), ("pos_err_cm", err_cm), ("fps", fps)],
+                    );
+                }
+                if done < n && unit.checkpoint_due() {
+                    // The rows first: a kill between the two writes then loses none of the
+                    // rows the checkpoint counts as done (a resume drops the later ones).
+                    tracking_log.flush()?;
+                    unit.checkpoint(done as u64, |w| {
+                        w.f64s(&lost.iter().map(|&i| i as f64).collect::<Vec<_>>());
+                        slam.save(w);
+                        model.save(w);
+                        Ok(())
+                    })?;
+                }
             }
-            progress.inc(1);
-            if every > 0 && (i + 1) % every == 0 && i + 1 < n {
-                let mut w = Writer::new();
-                w.u64((i + 1) as u64);
-                w.f64s(&lost.iter().map(|&i| i as f64).collect::<Vec<_>>());
-                w.f64(earlier_s + started.elapsed().as_secs_f64());
-                slam.save(&mut w);
-                model.save(&mut w);
-                // The rows first: a kill between the two writes then loses none of the rows
-                // the checkpoint counts as done (a resume drops the later ones).
-                tracking_log.flush()?;
-                w.save(&checkpoint)?;
-            }
-            if (i + 1) % 100 == 0 || i + 1 == n {
-                let err = truth[i].map_or(f64::NAN, |t| {
-                    (t.translation.vector - slam.estimates[i].translation.vector).norm()
-                });
-                input.run_dir.log(format_args!(
-                    "{} {}/{n}: position error {:.2} cm, {:.2} frames/s",
-                    key,
-                    i + 1,
-                    100.0 * err,
-                    (i + 1 - first) as f64 / started.elapsed().as_secs_f64()
+            tracking_log.flush()?;
+            let wall_s = unit.wall_secs();
+            let all = Trajectory::new(times.clone(), slam.estimates.clone())?;
+            write_tum(unit.file("traj", "txt"), &all)?;
+            let plot = unit.file("trajectory", "png");
+            let scored = match &gt {
+                Some(gt) => {
+                    let est = Trajectory::new(
+                        valid.iter().map(|&i| times[i]).collect(),
+                        valid.iter().map(|&i| slam.estimates[i]).collect(),
+                    )?;
+                    let (report, alignment) = score(gt, &est, unit)?;
+                    let (_, aligned) = align_poses(gt.poses(), est.poses(), alignment)?;
+                    let how = match alignment {
+                        Alignment::None => "not aligned",
+                        Alignment::Se3 => "SE(3)-aligned",
+                        Alignment::Sim3 => "Sim(3)-aligned",
+                    };
+                    let title = format!(
+                        "slam, {sequence}: {key} camera path, {how} to the truth; ATE RMSE {:.2} cm",
+                        100.0 * report.rmse_m
+                    );
+                    let drawn = plot::trajectory_comparison(
+                        &plot,
+                        &title,
+                        gt.timestamps_secs(),
+                        Some(gt.poses()),
+                        None,
+                        (&format!("{key} ({how})"), &aligned),
+                    );
+                    if let Err(e) = drawn {
+                        unit.log(format_args!("no trajectory plot: {e}"));
+                    }
+                    Some((report, alignment))
+                }
+                None => {
+                    unit.log("no ground truth, no ATE");
+                    let title = format!("slam, {sequence}: {key} camera path (no ground truth)");
+                    let drawn = plot::trajectory_comparison(
+                        &plot,
+                        &title,
+                        &times,
+                        None,
+                        None,
+                        (&key, &slam.estimates),
+                    );
+                    if let Err(e) = drawn {
+                        unit.log(format_args!("no trajectory plot: {e}"));
+                    }
+                    None
+                }
+            };
+            save_view(&mut slam, seq, n - 1, unit)?;
+            let mut surface = None;
+            if let Some((grid, level, margin)) = &setup.mesh {
+                let mesh = slam.mesh(grid, *level, *margin);
+                let path = unit.file("mesh", "ply");
+                mesh.write_ply(&path)?;
+                surface = score_mesh(&mesh, seq, truth, n)?;
+                unit.log(format_args!(
+                    "mesh of {} triangles ({:.1} m²) in {}{}",
+                    mesh.triangles.len(),
+                    mesh.area(),
+                    path.display(),
+                    surface.map_or(String::new(), |s| format!(
+                        "; accuracy {:.2} cm, completion {:.1}% (true surface within {} cm)",
+                        100.0 * s.accuracy_m,
+                        100.0 * s.completion,
+                        100.0 * COMPLETION_RADIUS
+                    ))
                 ));
             }
-        }
-        progress.finish();
-        tracking_log.flush()?;
-        let wall_s = earlier_s + started.elapsed().as_secs_f64();
-        let all = Trajectory::new(times.clone(), slam.estimates.clone())?;
-        write_tum(input.run_dir.file(format!("traj_{}.txt", key)), &all)?;
-        let plot = input.run_dir.file(format!("trajectory_{}.png", key));
-        let scored = match &gt {
-            Some(gt) => {
-                let est = Trajectory::new(
-                    valid.iter().map(|&i| times[i]).collect(),
-                    valid.iter().map(|&i| slam.estimates[i]).collect(),
-                )?;
-                let (report, alignment) = score(gt, &est, input, key)?;
-                let (_, aligned) = align_poses(gt.poses(), est.poses(), alignment)?;
-                trajectory_plot(512, gt.poses(), &[], &aligned).save_png(&plot)?;
-                Some((report, alignment))
-            }
-            None => {
-                trajectory_plot(512, &[], &[], &slam.estimates).save_png(&plot)?;
-                None
-            }
-        };
-        save_view(&mut slam, seq, n - 1, input, key)?;
-        let mut surface = None;
-        if let Some((grid, level, margin)) = &setup.mesh {
-            let mesh = slam.mesh(grid, *level, *margin);
-            let path = input.run_dir.file(format!("mesh_{}.ply", key));
-            mesh.write_ply(&path)?;
-            surface = score_mesh(&mesh, seq, truth, n)?;
-            input.run_dir.log(format_args!(
-                "{}: mesh of {} triangles ({:.1} m²) in {}{}",
-                key,
-                mesh.triangles.len(),
-                mesh.area(),
-                path.display(),
-                surface.map_or(String::new(), |s| format!(
-                    "; accuracy {:.2} cm, completion {:.1}% (true surface within {} cm)",
-                    100.0 * s.accuracy_m,
-                    100.0 * s.completion,
-                    100.0 * COMPLETION_RADIUS
-                ))
-            ));
-        }
-        let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, _)| 100.0 * f(r));
-        let result = MethodResult {
-            ate_rmse_cm: cm(|r| r.rmse_m),
-            ate_mean_cm: cm(|r| r.mean_m),
-            ate_max_cm: cm(|r| r.max_m),
-            ate_alignment: scored.as_ref().map(|(_, a)| a.as_str()),
-            frames: n,
-            lost_frames: lost.len(),
-            first_lost: lost.first().copied(),
-            fps: n as f64 / wall_s,
-            wall_s,
-            mesh_accuracy_cm: surface.map(|s| 100.0 * s.accuracy_m),
-            mesh_completion: surface.map(|s| s.completion),
-            extra: model
-                .metrics()
-                .into_iter()
-                .map(|(k, v)| (k.to_string(), v))
-                .collect(),
-        };
-        let ate = match &scored {
-            Some((r, _)) => format!(
-                "ATE RMSE {:.2} cm (mean {:.2}, max {:.2})",
-                100.0 * r.rmse_m,
-                100.0 * r.mean_m,
-                100.0 * r.max_m
-            ),
-            None => "no ground truth, no ATE".to_string(),
-        };
-        input.run_dir.log(format_args!(
-            "{}: {ate}, {:.2} frames/s, {:.0} s",
-            key, result.fps, wall_s
-        ));
-        results.insert(key.to_string(), serde_json::to_value(&result)?);
-        input.run_dir.write_json("metrics.json", &results)?;
-        // Finished: its checkpoint (the map, megabytes) is no longer needed.
-        let _ = std::fs::remove_file(&checkpoint);
-    }
-    Ok(results)
+            let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, _)| 100.0 * f(r));
+            let result = MethodResult {
+                ate_rmse_cm: cm(|r| r.rmse_m),
+                ate_mean_cm: cm(|r| r.mean_m),
+                ate_max_cm: cm(|r| r.max_m),
+                ate_alignment: scored.as_ref().map(|(_, a)| a.as_str()),
+                frames: n,
+                lost_frames: lost.len(),
+                first_lost: lost.first().copied(),
+                fps: n as f64 / wall_s,
+                mesh_accuracy_cm: surface.map(|s| 100.0 * s.accuracy_m),
+                mesh_completion: surface.map(|s| s.completion),
+                extra: model
+                    .metrics()
+                    .into_iter()
+                    .map(|(k, v)| (k.to_string(), v))
+                    .collect(),
+            };
+            Metrics::from_serialize(&result)
+        })?;
+    Ok(())
 }
 
 /// `tracking_<method>.csv`: one row per tracked frame, where the pose model started it and
@@ -780,17 +772,12 @@ impl TrackingLog {
 /// The ATE of `est` against `gt` with SE(3) alignment, as NICE-SLAM and `cpose eval ate`; a
 /// short, nearly straight run makes the alignment ill-posed, and then the error is taken as it
 /// is (frame 0 starts at its true pose, so the frames already agree), and the log says so.
-fn score(
-    gt: &Trajectory,
-    est: &Trajectory,
-    input: &TaskInput,
-    key: &str,
-) -> anyhow::Result<(AteReport, Alignment)> {
+fn score(gt: &Trajectory, est: &Trajectory, unit: &Unit) -> anyhow::Result<(AteReport, Alignment)> {
     match ate(gt, est, Alignment::Se3, 1e-6) {
         Ok(report) => Ok((report, Alignment::Se3)),
         Err(e) => {
-            input.run_dir.log(format_args!(
-                "{key}: no SE(3) alignment ({e}); ATE without alignment"
+            unit.log(format_args!(
+                "no SE(3) alignment ({e}); ATE without alignment"
             ));
             Ok((ate(gt, est, Alignment::None, 1e-6)?, Alignment::None))
         }
@@ -799,13 +786,7 @@ fn score(
 
 /// Renders frame `index` from the map at its estimated pose (samples placed by the measured
 /// depth) beside the input, as `view_<method>.png` (left: input, right: render).
-fn save_view(
-    slam: &mut Slam,
-    seq: &RgbdSequence,
-    index: usize,
-    input: &TaskInput,
-    key: &str,
-) -> anyhow::Result<()> {
+fn save_view(slam: &mut Slam, seq: &RgbdSequence, index: usize, unit: &Unit) -> anyhow::Result<()> {
     let frame = seq.load(index)?;
     let camera = seq.camera;
     let pose = slam.estimates[index];
@@ -816,7 +797,7 @@ fn save_view(
             let depth = frame.depth.at(x, y);
             if depth > 0.0 {
                 pixels.push(PixelSample {
-                    ray: cpose_nerf::nerf::render::CameraRay::new(
+                    ray: cpose_nerf::render::CameraRay::new(
                         0,
                         &pose,
                         camera.ray_direction_cam(x, y),
@@ -844,6 +825,6 @@ fn save_view(
             rendered[y * w + x - w]
         }
     });
-    side.save_png(input.run_dir.file(format!("view_{key}.png")))?;
+    side.save_png(unit.file("view", "png"))?;
     Ok(())
 }

@@ -10,8 +10,10 @@
 //!   network's weights are what tracking optimises, so it starts every frame from its own
 //!   prediction `PN(t_i)`. The best relative pose of every tracked frame is kept, and after each
 //!   frame PoseNet is re-fitted on that list (a batch of earlier frames plus the newest), so it
-//!   stays a consistent function of time. A measured motion increment (an IMU's, see
-//!   [`MotionIncrement`]) can tie the relative pose of a frame.
+//!   stays a consistent function of time. Two hooks add terms of other sensors to a frame's
+//!   objective: on the network's relative pose at the frame ([`RelativePoseTerm`], e.g. a
+//!   measured motion since the previous frame) and on the network itself ([`NetworkObjective`],
+//!   e.g. on its time derivatives); `cpose-imu` implements both.
 //! * [`IntrinsicTracker`], the paper's intrinsic motion frame: the relative motion
 //!   `T_o ∘ T_I ∘ T_o⁻¹` from two such PoseNets, with the DOF loss on the intrinsic motion `T_I`.
 //!
@@ -219,17 +221,18 @@ pub struct PoseNetTracker {
     seed: u64,
     /// Drawn afresh for each frame from `seed` and its index (resumable runs).
     rng: ChaCha8Rng,
-    /// The measured increment of the next frame ([`PoseNetTracker::set_increment`]).
-    increment: Option<MotionIncrement>,
-    /// The frame being tracked: what its relative pose should be, and the weights.
-    prior: Option<RelativePrior>,
+    /// A term on the relative pose of the next frame to begin, and its prediction steps
+    /// ([`PoseNetTracker::set_relative_term`]).
+    next_relative_term: Option<(Box<dyn RelativePoseTerm>, usize)>,
+    /// The term on the relative pose of the frame being tracked.
+    relative_term: Option<Box<dyn RelativePoseTerm>>,
     /// A term on the network itself for the next frame, and its prediction steps
     /// ([`PoseNetTracker::set_objective`]).
     objective: Option<(Box<dyn NetworkObjective>, usize)>,
 }
 
-/// A term of a frame's objective on PoseNet itself rather than on the frame's pose — an IMU's
-/// terms on the network's time derivatives ([`PoseNetTracker::set_objective`]).
+/// A term of a frame's objective on PoseNet itself rather than on the frame's pose — e.g. another
+/// sensor's terms on the network's time derivatives ([`PoseNetTracker::set_objective`]).
 pub trait NetworkObjective: Send {
     /// Adds the term's gradient with respect to the network's parameters to `grad`; returns the
     /// term's value.
@@ -239,29 +242,16 @@ pub trait NetworkObjective: Send {
     fn start_tracking(&mut self) {}
 }
 
-/// A measured motion from the previous pose `T_{i−1}` to the one being tracked — an IMU's
-/// integrals over the frame interval, in the tracked (body) frame. It ties PoseNet's relative
-/// pose `PN(t_i)` to `T̂_rel = T_ref⁻¹ T_{i−1} ΔT`, what it must be for `T_i = T_ref ∘ PN(t_i)`
-/// to move by `ΔT`: `λ_R |q_rel − s q̂_rel|₁ + λ_p ‖t_rel − t̂_rel‖₁`, with `s = ±1` aligning the
-/// signs — the relative form of the paper's loose coupling (§3.4).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MotionIncrement {
-    /// `Δq = q_{i−1}* ⊗ q_i`.
-    pub rotation: UnitQuaternion<f64>,
-    /// `λ_R`, in units of the tracking loss.
-    pub rotation_weight: f64,
-    /// `Δp = R_{i−1}ᵀ (p_i − p_{i−1})` and `λ_p` (per metre), if measured.
-    pub translation: Option<(Vector3<f64>, f64)>,
-    /// Adam steps on the ties alone before tracking starts: the frame then starts moved by them.
-    pub predict_steps: usize,
-}
-
-/// [`MotionIncrement`] in the network's output: the targets and weights.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct RelativePrior {
-    rotation: UnitQuaternion<f64>,
-    rotation_weight: f64,
-    translation: Option<(Vector3<f64>, f64)>,
+/// A term of a frame's objective on PoseNet's relative pose at the frame, `PN(t_i) = (q, t)`
+/// (`T_i = T_ref ∘ PN(t_i)`), e.g. a tie to a motion since the previous frame measured by
+/// another sensor ([`PoseNetTracker::set_relative_term`]).
+pub trait RelativePoseTerm: Send {
+    /// The frame begins with the reference `reference` (`T_ref`) after the frames `history`
+    /// (`history.len()` is the frame's index, at least 1): the term fixes its target.
+    fn begin(&mut self, reference: &Isometry3<f64>, history: &[Isometry3<f64>]);
+    /// The term's gradient `(∂/∂q, ∂/∂t)` at the relative pose `(q, t)` (raw partials, `q`
+    /// unnormalised).
+    fn gradient(&self, q: &Quaternion<f64>, t: &Vector3<f64>) -> (Quaternion<f64>, Vector3<f64>);
 }
 
 impl PoseNetTracker {
@@ -291,15 +281,21 @@ impl PoseNetTracker {
             memory: Vec::new(),
             seed,
             rng: ChaCha8Rng::seed_from_u64(seed),
-            increment: None,
-            prior: None,
+            next_relative_term: None,
+            relative_term: None,
             objective: None,
         })
     }
 
-    /// The measured increment of the next frame to begin (`None`: no tie); it is used once.
-    pub fn set_increment(&mut self, increment: Option<MotionIncrement>) {
-        self.increment = increment;
+    /// A term on the relative pose of the next frame to begin, which then starts with
+    /// `predict_steps` Adam steps on its terms alone (`None`: no term); it lasts until that frame
+    /// ends.
+    pub fn set_relative_term(
+        &mut self,
+        term: Option<Box<dyn RelativePoseTerm>>,
+        predict_steps: usize,
+    ) {
+        self.next_relative_term = term.map(|t| (t, predict_steps));
     }
 
     /// A term added to every step of the next frame to begin, which then starts with
@@ -401,24 +397,12 @@ impl PoseModel for PoseNetTracker {
         };
         self.time = time;
         self.evaluate()?;
-        self.prior = None;
+        self.relative_term = None;
         let mut predict_steps = 0;
-        if let Some(inc) = self.increment.take() {
-            let previous = &history[index - 1];
-            let reference = self.current_ref.inverse();
-            let translation = inc.translation.map(|(dp, weight)| {
-                let p = previous.translation.vector + previous.rotation * dp;
-                (
-                    reference.rotation * p + reference.translation.vector,
-                    weight,
-                )
-            });
-            self.prior = Some(RelativePrior {
-                rotation: reference.rotation * previous.rotation * inc.rotation,
-                rotation_weight: inc.rotation_weight,
-                translation,
-            });
-            predict_steps = inc.predict_steps;
+        if let Some((mut term, steps)) = self.next_relative_term.take() {
+            term.begin(&self.current_ref, &history[..index]);
+            self.relative_term = Some(term);
+            predict_steps = steps;
         }
         if let Some((_, steps)) = &self.objective {
             predict_steps = predict_steps.max(*steps);
@@ -451,6 +435,7 @@ impl PoseModel for PoseNetTracker {
 
     fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
         self.objective = None;
+        self.relative_term = None;
         let rel = self.current_ref.inverse() * pose;
         self.memorise(time, rel)
     }
@@ -511,17 +496,11 @@ impl PoseNetTracker {
     /// current time; re-evaluates it.
     fn step_relative(&mut self, gq: &Quaternion<f64>, gt: &Vector3<f64>) -> anyhow::Result<()> {
         let (mut gq, mut gt) = (*gq, *gt);
-        if let Some(prior) = self.prior {
+        if let Some(term) = &self.relative_term {
             // On the network's output at t_i (the last evaluation).
-            gq += rotation_tie(
-                &self.batch.rotation[0],
-                &prior.rotation,
-                prior.rotation_weight,
-            )
-            .1;
-            if let Some((target, weight)) = prior.translation {
-                gt += translation_tie(&self.batch.translation[0], &target, weight).1;
-            }
+            let (dq, dt) = term.gradient(&self.batch.rotation[0], &self.batch.translation[0]);
+            gq += dq;
+            gt += dt;
         }
         self.cotangent.reset(1, Order::Pose);
         self.cotangent.rotation[0] = gq;
@@ -549,31 +528,6 @@ impl PoseNetTracker {
         self.memory.push((time, relative));
         self.refit()
     }
-}
-
-/// `λ |q − s q̂|₁` with `s = ±1` the sign of `⟨q, q̂⟩`, and its gradient `λ sign(q − s q̂)` in `q`
-/// ([`MotionIncrement`]).
-fn rotation_tie(
-    q: &Quaternion<f64>,
-    target: &UnitQuaternion<f64>,
-    weight: f64,
-) -> (f64, Quaternion<f64>) {
-    let s = if q.coords.dot(&target.coords) < 0.0 {
-        -1.0
-    } else {
-        1.0
-    };
-    let r = q - target.into_inner() * s;
-    (
-        weight * r.coords.abs().sum(),
-        Quaternion::from(r.coords.map(l1_subgradient)) * weight,
-    )
-}
-
-/// `λ ‖t − t̂‖₁` and its gradient `λ sign(t − t̂)` in `t` ([`MotionIncrement`]).
-fn translation_tie(t: &Vector3<f64>, target: &Vector3<f64>, weight: f64) -> (f64, Vector3<f64>) {
-    let r = t - target;
-    (weight * r.abs().sum(), r.map(l1_subgradient) * weight)
 }
 
 /// The rotation vector `ω = θ n` of a unit quaternion `q = (w, u)` with `w ≥ 0` and its Jacobian
@@ -1046,88 +1000,6 @@ mod tests {
                 "param {k}: {a} vs {numeric}"
             );
         }
-    }
-
-    #[test]
-    fn ties_match_central_differences() {
-        let target = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.9);
-        for q in [
-            Quaternion::new(0.8, 0.1, -0.3, 0.4),
-            Quaternion::new(-0.5, 0.2, 0.4, -0.7),
-        ] {
-            let (_, g) = rotation_tie(&q, &target, 1.7);
-            for k in 0..4 {
-                let h = 1e-7;
-                let (mut a, mut b) = (q.coords, q.coords);
-                a[k] += h;
-                b[k] -= h;
-                let numeric = (rotation_tie(&Quaternion::from(a), &target, 1.7).0
-                    - rotation_tie(&Quaternion::from(b), &target, 1.7).0)
-                    / (2.0 * h);
-                assert!(
-                    (numeric - g.coords[k]).abs() < 1e-6,
-                    "{k}: {numeric} vs {g:?}"
-                );
-            }
-        }
-        let (t, target) = (Vector3::new(0.3, -0.2, 0.05), Vector3::new(0.1, 0.4, -0.3));
-        let (_, g) = translation_tie(&t, &target, 0.8);
-        for k in 0..3 {
-            let h = 1e-7;
-            let (mut a, mut b) = (t, t);
-            a[k] += h;
-            b[k] -= h;
-            let numeric = (translation_tie(&a, &target, 0.8).0
-                - translation_tie(&b, &target, 0.8).0)
-                / (2.0 * h);
-            assert!((numeric - g[k]).abs() < 1e-6, "{k}: {numeric} vs {g:?}");
-        }
-    }
-
-    /// With a measured increment and its prediction steps, the frame starts moved by it from the
-    /// previous pose; without, PoseNet (at the identity) predicts no motion.
-    #[test]
-    fn a_motion_increment_moves_the_start_of_the_frame() {
-        let range = TimeRange::new(0.0, 1.0).unwrap();
-        let config = PoseNetTrackConfig::default();
-        let prev = Isometry3::from_parts(
-            Translation3::new(0.5, -1.0, 2.0),
-            UnitQuaternion::from_euler_angles(0.4, -0.3, 1.0),
-        );
-        let delta = Isometry3::from_parts(
-            Translation3::new(0.04, -0.03, 0.02),
-            UnitQuaternion::from_euler_angles(0.05, -0.08, 0.03),
-        );
-        let truth = prev * delta;
-        let errors = |increment: Option<MotionIncrement>| {
-            let mut tracker = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
-            tracker.set_increment(increment);
-            let start = tracker.begin(1, 0.4, &[prev]).unwrap();
-            (
-                start.rotation.angle_to(&truth.rotation).to_degrees(),
-                (start.translation.vector - truth.translation.vector).norm(),
-            )
-        };
-        let without = errors(None);
-        let increment = MotionIncrement {
-            rotation: delta.rotation,
-            rotation_weight: 1.0,
-            translation: None,
-            predict_steps: 60,
-        };
-        let turned = errors(Some(increment));
-        let moved = errors(Some(MotionIncrement {
-            translation: Some((delta.translation.vector, 1.0)),
-            ..increment
-        }));
-        assert!(without.0 > 5.0 && without.1 > 0.05, "{without:?}");
-        assert!(turned.0 < 0.1 * without.0, "{without:?} → {turned:?}");
-        // The rotation tie alone leaves the translation network where it was.
-        assert!(
-            (turned.1 - without.1).abs() < 1e-9,
-            "{without:?} → {turned:?}"
-        );
-        assert!(moved.1 < 0.1 * without.1, "{without:?} → {moved:?}");
     }
 
     #[test]

@@ -9,6 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::coarse_to_fine_weights;
 use crate::Real;
 
 /// Which encoding a network applies to its input.
@@ -64,20 +65,10 @@ impl Embedding {
         &self.weights
     }
 
-    /// BARF's coarse-to-fine schedule: with `α = (progress − start)/(end − start) · F`, band `k`
-    /// gets `w_k = (1 − cos(π · clamp(α − k, 0, 1)))/2`. `progress`, `start`, `end` are fractions
-    /// of training (0–1); `end ≤ start` switches all bands fully on.
+    /// BARF's coarse-to-fine schedule on the bands ([`coarse_to_fine_weights`]): `progress`,
+    /// `start`, `end` are fractions of training (0–1); `end ≤ start` switches all bands fully on.
     pub fn set_coarse_to_fine(&mut self, progress: f64, start: f64, end: f64) {
-        let f = self.bands as f64;
-        let alpha = if end > start {
-            (progress - start) / (end - start) * f
-        } else {
-            f
-        };
-        for (k, w) in self.weights.iter_mut().enumerate() {
-            let a = (alpha - k as f64).clamp(0.0, 1.0);
-            *w = (1.0 - (std::f64::consts::PI * a).cos()) / 2.0;
-        }
+        coarse_to_fine_weights(progress, start, end, &mut self.weights);
     }
 
     /// Encodes `b` inputs with their tangents. `x` is `[streams·b × D]` column-major: values,
@@ -237,19 +228,5 @@ mod tests {
                 gx[d]
             );
         }
-    }
-
-    #[test]
-    fn coarse_to_fine_weights() {
-        let mut e = Embedding::new(Encoding::Sinusoidal, 1, 4);
-        e.set_coarse_to_fine(0.0, 0.1, 0.5);
-        assert!(e.weights().iter().all(|&w| w == 0.0));
-        e.set_coarse_to_fine(0.3, 0.1, 0.5); // α = 2
-        assert_eq!(e.weights()[..2], [1.0, 1.0]);
-        assert_eq!(e.weights()[2..], [0.0, 0.0]);
-        e.set_coarse_to_fine(0.35, 0.1, 0.5); // α = 2.5
-        assert!((e.weights()[2] - 0.5).abs() < 1e-12);
-        e.set_coarse_to_fine(1.0, 0.1, 0.5);
-        assert!(e.weights().iter().all(|&w| w == 1.0));
     }
 }

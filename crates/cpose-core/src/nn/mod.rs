@@ -1,6 +1,6 @@
 //! A small neural-network kit with exact input derivatives: activations, an MLP with tangent
 //! streams and a hand-written reverse pass (matrix products through faer), input encodings,
-//! seeded initialisation and Adam.
+//! BARF's coarse-to-fine weights, seeded initialisation and Adam.
 //!
 //! Scalars are generic over [`Real`](crate::Real): `f32` for training, `f64` for gradient checks.
 //! Buffers live in workspaces that grow with the batch and are reused, so a training loop does
@@ -8,11 +8,13 @@
 
 mod activation;
 mod adam;
+mod coarse_to_fine;
 mod embedding;
 mod mlp;
 
 pub use activation::Activation;
 pub use adam::{Adam, ExponentialDecay};
+pub use coarse_to_fine::coarse_to_fine_weights;
 pub use embedding::{Embedding, Encoding};
 pub use faer::Accum;
 pub use mlp::{Init, Mlp, MlpSpec, MlpWorkspace};

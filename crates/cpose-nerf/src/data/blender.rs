@@ -24,7 +24,8 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Vector3};
 use serde_json::Value;
 
-use super::{DataError, Dataset, isometry_from_rt, load_same_size};
+use super::{Dataset, isometry_from_rt, load_same_size};
+use crate::DataError;
 use crate::camera::PinholeCamera;
 use crate::image::Image;
 

@@ -15,8 +15,9 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
+use crate::DataError;
 use crate::camera::PinholeCamera;
-use crate::image::{Image, ImageError};
+use crate::image::Image;
 
 pub mod blender;
 pub mod llff;
@@ -75,51 +76,12 @@ pub fn subsample<T: Clone>(items: &[T], every: usize) -> Vec<T> {
     items.iter().step_by(every).cloned().collect()
 }
 
-/// Errors from the dataset readers; each names the file or folder at fault.
-#[derive(Debug, thiserror::Error)]
-pub enum DataError {
-    /// A file or folder could not be read.
-    #[error("cannot read {}: {error}", .path.display())]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The underlying error.
-        error: std::io::Error,
-    },
-    /// An image could not be loaded (the error names the file).
-    #[error(transparent)]
-    Image(#[from] ImageError),
-    /// A file's content is not what the format requires.
-    #[error("{}: expected {expected}, got {found}", .path.display())]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// What the reader expected.
-        expected: String,
-        /// What it found.
-        found: String,
-    },
-    /// An image's size differs from the first image's.
-    #[error("image {}: expected the size of the first image {}, {}×{}, got {}×{}",
-        .path.display(), .first.display(), .expected.0, .expected.1, .found.0, .found.1)]
-    ImageSize {
-        /// The image file.
-        path: PathBuf,
-        /// The first image file, whose size all must have.
-        first: PathBuf,
-        /// The first image's `(width, height)`.
-        expected: (usize, usize),
-        /// This image's `(width, height)`.
-        found: (usize, usize),
-    },
-}
-
 /// Loads `paths` with `load`, checking that all images have the size of the first one.
 /// Returns the images and their `(width, height)`; errors if `paths` is empty (naming `folder`).
 fn load_same_size(
     paths: &[PathBuf],
     folder: &Path,
-    load: impl Fn(&Path) -> Result<Image, ImageError>,
+    load: impl Fn(&Path) -> Result<Image, DataError>,
 ) -> Result<(Vec<Image>, (usize, usize)), DataError> {
     let mut images = Vec::with_capacity(paths.len());
     let mut size = None;

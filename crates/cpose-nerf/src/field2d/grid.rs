@@ -3,13 +3,13 @@
 use std::ops::Range;
 
 use cpose_core::Real;
-use cpose_core::nn::{Accum, Activation, Init, Mlp, MlpSpec, MlpWorkspace};
+use cpose_core::nn::{Accum, Activation, Init, Mlp, MlpSpec, MlpWorkspace, coarse_to_fine_weights};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{Field2dError, ImageField, batch_len, sigmoid_backward, sigmoid_forward};
-use crate::field_common::{c2f_serde, check_c2f, coarse_to_fine_weights, grow, invalid};
+use crate::field_common::{c2f_serde, c2f_window, check_c2f, grow, invalid};
 
 /// Largest accepted `finest_resolution`: a dense level holds `(R + 1)² · F` values.
 const MAX_RESOLUTION: usize = 4096;
@@ -294,7 +294,8 @@ impl<S: Real> ImageField<S> for GridField<S> {
     }
 
     fn set_progress(&mut self, progress: f64) {
-        coarse_to_fine_weights(progress, self.config.c2f, &mut self.weights);
+        let [start, end] = c2f_window(self.config.c2f);
+        coarse_to_fine_weights(progress, start, end, &mut self.weights);
     }
 
     fn forward(&mut self, points: &[S], rgb: &mut [S]) {

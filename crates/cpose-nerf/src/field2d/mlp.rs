@@ -5,7 +5,7 @@ use cpose_core::nn::{Accum, Activation, Embedding, Encoding, Init, Mlp, MlpSpec,
 use serde::{Deserialize, Serialize};
 
 use super::{Field2dError, ImageField, batch_len, sigmoid_backward, sigmoid_forward};
-use crate::field_common::{c2f_serde, check_c2f, grow, invalid};
+use crate::field_common::{c2f_serde, c2f_window, check_c2f, grow, invalid};
 
 /// Most frequency bands accepted: band `k` has period `2^(1−k)`, at `k = 15` 1/32768 of the
 /// image side (far below a pixel), and the `f32` argument `2^k π x` has lost most digits.
@@ -160,11 +160,8 @@ impl<S: Real> ImageField<S> for PeMlpField<S> {
     }
 
     fn set_progress(&mut self, progress: f64) {
-        match self.config.c2f {
-            Some([start, end]) => self.embedding.set_coarse_to_fine(progress, start, end),
-            // `end ≤ start` switches every band fully on.
-            None => self.embedding.set_coarse_to_fine(progress, 1.0, 0.0),
-        }
+        let [start, end] = c2f_window(self.config.c2f);
+        self.embedding.set_coarse_to_fine(progress, start, end);
     }
 
     fn forward(&mut self, points: &[S], rgb: &mut [S]) {

@@ -3,7 +3,7 @@
 use std::ops::Range;
 
 use cpose_core::Real;
-use cpose_core::nn::{Accum, Activation, Init, Mlp, MlpSpec, MlpWorkspace};
+use cpose_core::nn::{Accum, Activation, Init, Mlp, MlpSpec, MlpWorkspace, coarse_to_fine_weights};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -13,7 +13,7 @@ use super::{
     check_backward, chunks, colour_backward, colour_forward, copy_colours, density_forward,
     parts_for, run_parts,
 };
-use crate::field_common::{c2f_serde, check_c2f, coarse_to_fine_weights, grow, invalid};
+use crate::field_common::{c2f_serde, c2f_window, check_c2f, grow, invalid};
 
 /// Largest accepted `finest_resolution`: `f32` cell positions `u ≤ 65536` keep a resolution of
 /// `2⁻⁷` cells, and vertex coordinates fit the `u32` hash arithmetic.
@@ -339,7 +339,8 @@ impl Level {
 /// the window opens the others.
 fn level_weights(progress: f64, c2f: Option<[f64; 2]>, weights: &mut [f64]) {
     weights[0] = 1.0;
-    coarse_to_fine_weights(progress, c2f, &mut weights[1..]);
+    let [start, end] = c2f_window(c2f);
+    coarse_to_fine_weights(progress, start, end, &mut weights[1..]);
 }
 
 /// Where a point falls on one level.

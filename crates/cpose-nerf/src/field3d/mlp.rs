@@ -15,7 +15,7 @@ use super::{
     check_backward, chunks, colour_backward, colour_forward, copy_colours, density_forward,
     parts_for, run_parts,
 };
-use crate::field_common::{c2f_serde, check_c2f, grow, invalid};
+use crate::field_common::{c2f_serde, c2f_window, check_c2f, grow, invalid};
 
 /// Most frequency bands accepted: band `k` has period `2^(1−k)` in field coordinates, at
 /// `k = 15` 1/32768 of the unit ball's radius.
@@ -403,11 +403,8 @@ impl<S: Real> RadianceField<S> for NerfMlpField<S> {
     }
 
     fn set_progress(&mut self, progress: f64) {
-        match self.config.c2f {
-            Some([start, end]) => self.embedding.set_coarse_to_fine(progress, start, end),
-            // `end ≤ start` switches every band fully on.
-            None => self.embedding.set_coarse_to_fine(progress, 1.0, 0.0),
-        }
+        let [start, end] = c2f_window(self.config.c2f);
+        self.embedding.set_coarse_to_fine(progress, start, end);
     }
 
     fn forward(&mut self, points: &[S], sigma: &mut [S], rgb: &mut [S]) {

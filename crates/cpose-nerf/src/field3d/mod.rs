@@ -1,7 +1,7 @@
 //! 3-D radiance fields for NeRF (BARF §4.2; algorithms.md §2.3).
 //!
 //! A field maps a world point `x ∈ R³` to a density `σ ≥ 0` (per world unit of length, the unit
-//! of the renderer's `δ`, see [`crate::volume`]) and a colour `rgb ∈ (0, 1)³`, and
+//! of the renderer's `δ`, see [`crate::render::volume`]) and a colour `rgb ∈ (0, 1)³`, and
 //! differentiates both with respect to its parameters *and* to the point, which is what the
 //! camera poses need.
 //!
@@ -51,7 +51,7 @@
 //! the next. Buffers grow with the batch and are kept, so a training loop does not allocate in
 //! its steady state.
 //!
-//! Not for: sampling or compositing along rays ([`crate::volume`]), cameras ([`crate::camera`]).
+//! Not for: sampling or compositing along rays ([`crate::render::volume`]), cameras ([`crate::camera`]).
 
 mod grid;
 mod mlp;

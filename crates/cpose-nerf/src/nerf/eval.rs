@@ -1,7 +1,7 @@
 //! Evaluation of a trained run, as BARF (algorithms.md §2.4–2.5): pose errors after Procrustes
 //! alignment of the camera centres, novel views rendered from the ground-truth test poses
 //! mapped into the learned frame, with and without test-time photometric refinement of each
-//! test pose, PSNR and SSIM; and pictures (depth maps, a top-down trajectory plot).
+//! test pose, PSNR and SSIM; and a top-down trajectory plot.
 
 use cpose_core::geometry::se3_exp;
 use cpose_core::nn::Adam;
@@ -9,11 +9,10 @@ use nalgebra::{Isometry3, Vector6};
 use rand::seq::index::sample;
 use rand_chacha::ChaCha8Rng;
 
-use super::render::{CameraRay, RenderSettings, Renderer};
 use crate::camera::{PinholeCamera, PoseGradient};
 use crate::field3d::RadianceField;
 use crate::image::Image;
-use crate::volume::Composited;
+use crate::render::{CameraRay, Composited, RenderSettings, Renderer};
 
 /// Test-time photometric refinement (BARF `evaluate_test_time_photometric_optim`): a fresh
 /// camera-frame correction `δ ∈ se(3)` of the pose, `world_from_camera · Exp(δ)`, fitted by Adam
@@ -79,87 +78,4 @@ pub fn refine_pose(
         adam.step(&mut delta, g.as_slice(), refinement.lr);
     }
     current(&delta)
-}
-
-/// A depth map as a grey image: near white, far black, transparent pixels (opacity below ½)
-/// black; `[near, far]` spans the grey ramp.
-pub fn depth_image(
-    width: usize,
-    height: usize,
-    depth: &[f32],
-    opacity: &[f32],
-    near: f64,
-    far: f64,
-) -> Image {
-    Image::from_fn(width, height, |x, y| {
-        let i = y * width + x;
-        if opacity[i] < 0.5 {
-            return [0.0; 3];
-        }
-        let v = (1.0 - (depth[i] as f64 / opacity[i] as f64 - near) / (far - near)).clamp(0.0, 1.0)
-            as f32;
-        [v, v, v]
-    })
-}
-
-/// Colours of the trajectory plot.
-const TRUE_RGB: [f32; 3] = [0.1, 0.6, 0.2];
-const INITIAL_RGB: [f32; 3] = [0.85, 0.2, 0.15];
-const ESTIMATE_RGB: [f32; 3] = [0.15, 0.3, 0.9];
-
-/// A top-down (world x–y) plot of camera centres with a short tick along each viewing
-/// direction: true cameras green, initial red, estimated (aligned to the truth) blue, each
-/// sequence joined in time order.
-pub fn trajectory_plot(
-    size_px: usize,
-    truth: &[Isometry3<f64>],
-    initial: &[Isometry3<f64>],
-    estimate: &[Isometry3<f64>],
-) -> Image {
-    let mut image = Image::from_fn(size_px, size_px, |_, _| [1.0; 3]);
-    let all = truth.iter().chain(initial).chain(estimate);
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in all.clone() {
-        let c = p.translation.vector;
-        for k in 0..2 {
-            if c[k].is_finite() {
-                lo[k] = lo[k].min(c[k]);
-                hi[k] = hi[k].max(c[k]);
-            }
-        }
-    }
-    let span = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
-    let tick = 0.06 * span;
-    let margin = 0.08 * size_px as f64;
-    let scale = (size_px as f64 - 2.0 * margin) / span;
-    let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
-    // World y up on the page.
-    let to_px = |x: f64, y: f64| {
-        [
-            size_px as f64 / 2.0 + (x - mid[0]) * scale,
-            size_px as f64 / 2.0 - (y - mid[1]) * scale,
-        ]
-    };
-    for (poses, rgb) in [
-        (truth, TRUE_RGB),
-        (initial, INITIAL_RGB),
-        (estimate, ESTIMATE_RGB),
-    ] {
-        for pair in poses.windows(2) {
-            let (a, b) = (pair[0].translation.vector, pair[1].translation.vector);
-            image.draw_line(to_px(a.x, a.y), to_px(b.x, b.y), rgb, 1.0);
-        }
-        for p in poses {
-            let c = p.translation.vector;
-            let z = p.rotation * nalgebra::Vector3::z();
-            image.draw_line(
-                to_px(c.x, c.y),
-                to_px(c.x + tick * z.x, c.y + tick * z.y),
-                rgb,
-                1.0,
-            );
-            image.draw_marker(to_px(c.x, c.y), rgb, 3.0);
-        }
-    }
-    image
 }

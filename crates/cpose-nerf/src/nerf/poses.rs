@@ -15,6 +15,7 @@
 //! `∂L/∂t` (the homogeneous rotation of [`PoseGradient`], one "ray" of direction `t₀`); and
 //! `∂L/∂t_c = ∂L/∂t`.
 
+use cpose_core::checkpoint::{Reader, Writer};
 use cpose_core::nn::{Adam, ExponentialDecay};
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField};
 use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
@@ -166,29 +167,38 @@ impl FramePoses {
         Ok(())
     }
 
-    /// Writes the correction and its optimiser (nothing without a correction).
-    pub fn save_state(&self, w: &mut cpose_core::checkpoint::Writer) {
-        if let Some(c) = &self.correction {
-            w.pose_field(c.as_ref());
-            w.adam(&self.adam);
-        }
-    }
-
-    /// Restores [`FramePoses::save_state`] into poses built with the same config.
-    pub fn load_state(&mut self, r: &mut cpose_core::checkpoint::Reader) -> anyhow::Result<()> {
-        if let Some(c) = self.correction.as_mut() {
-            r.pose_field(c.as_mut())?;
-            r.adam(&mut self.adam)?;
-        }
-        Ok(())
-    }
-
     /// The correction's parameters, flat.
     pub fn params(&self) -> Vec<f32> {
         self.correction
             .as_deref()
             .map(cpose_core::pose_field::params_to_vec)
             .unwrap_or_default()
+    }
+
+    /// Writes the correction's parameters and its optimiser's state to a checkpoint.
+    pub fn write_state(&self, w: &mut Writer) {
+        w.u64(u64::from(self.correction.is_some()));
+        if let Some(c) = self.correction.as_deref() {
+            w.pose_field(c);
+        }
+        w.adam(&self.adam);
+    }
+
+    /// Restores what [`FramePoses::write_state`] wrote, into poses of the same kind and size.
+    pub fn read_state(&mut self, r: &mut Reader) -> anyhow::Result<()> {
+        let stored = r.u64()? == 1;
+        if stored != self.correction.is_some() {
+            anyhow::bail!(
+                "{}: the checkpoint's poses {} a correction, these {}",
+                r.path().display(),
+                if stored { "have" } else { "have no" },
+                if stored { "none" } else { "one" },
+            );
+        }
+        if let Some(c) = self.correction.as_deref_mut() {
+            r.pose_field(c)?;
+        }
+        r.adam(&mut self.adam)
     }
 }
 

@@ -24,11 +24,10 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::poses::FramePoses;
-use super::render::{CameraRay, RenderSettings, Renderer};
 use crate::camera::{PinholeCamera, PoseGradient};
 use crate::field3d::RadianceField;
 use crate::image::Image;
-use crate::volume::Composited;
+use crate::render::{CameraRay, Composited, RenderSettings, Renderer};
 
 /// Optimisation settings of one run.
 #[derive(Clone, Debug, PartialEq)]
@@ -251,10 +250,10 @@ impl<'a> Trainer<'a> {
             );
         }
         w.f32s(self.field.params());
-        w.adam(&self.optimizer.adam);
+        w.adam(self.optimizer.adam());
         w.rng(&self.rng);
         w.f64s(&self.pixels.iter().map(|&p| p as f64).collect::<Vec<_>>());
-        self.poses.save_state(w);
+        self.poses.write_state(w);
         Ok(())
     }
 
@@ -280,7 +279,7 @@ impl<'a> Trainer<'a> {
         if start > 0 && !self.initial_field.is_empty() {
             self.optimizer.restart(steps);
         }
-        r.adam(&mut self.optimizer.adam)?;
+        r.adam(self.optimizer.adam_mut())?;
         self.rng = r.rng()?;
         let pixels = r.f64s()?;
         if pixels.len() != self.pixels.len() {
@@ -290,7 +289,7 @@ impl<'a> Trainer<'a> {
             );
         }
         self.pixels = pixels.into_iter().map(|p| p as usize).collect();
-        self.poses.load_state(r)
+        self.poses.read_state(r)
     }
 }
 
@@ -343,6 +342,16 @@ impl FieldOptimizer {
         }
     }
 
+    /// Adam's moments and step count (for checkpoints).
+    pub fn adam(&self) -> &Adam<f32> {
+        &self.adam
+    }
+
+    /// Adam's state, to restore a checkpoint.
+    pub fn adam_mut(&mut self) -> &mut Adam<f32> {
+        &mut self.adam
+    }
+
     /// One Adam step of every group from the gradient `grad` at iteration `it`.
     pub fn step(&mut self, field: &mut dyn RadianceField, grad: &[f32], it: u64) {
         self.adam.begin_step();
@@ -379,9 +388,8 @@ pub(super) mod tests {
     use super::*;
     use crate::field3d::{HashGridConfig, SceneBounds};
     use crate::nerf::poses::PoseSchedules;
+    use crate::render::{LastInterval, Sampling};
     use crate::scene::{MonocularOrbit, SyntheticScene};
-    use crate::volume::LastInterval;
-    use crate::volume::Sampling;
 
     /// A small run on the synthetic scene: 4 views of 16×16 along the orbit, a small hash grid,
     /// BARF's per-frame correction starting at the true poses.

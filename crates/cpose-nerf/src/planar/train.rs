@@ -95,8 +95,8 @@ pub fn sample_patches(image: &Image, layout: &Layout, truth: &[Vec<f64>]) -> Vec
         .collect()
 }
 
-/// What [`Trainer::run`] calls after each step: with the steps done, the step's loss and the
-/// warp parameters that loss was computed with.
+/// Called after every training step with the steps done, the step's loss and the warp
+/// parameters it was computed with.
 pub type OnStep<'a> = dyn FnMut(usize, f64, &[f64]) -> anyhow::Result<()> + 'a;
 
 /// One method on one motion: the neural image, the pose model and the step's buffers (reused, so

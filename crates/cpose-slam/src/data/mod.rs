@@ -20,8 +20,9 @@ mod tum;
 
 use std::path::{Path, PathBuf};
 
+use cpose_nerf::DataError;
 use cpose_nerf::camera::PinholeCamera;
-use cpose_nerf::image::{Image, ImageError};
+use cpose_nerf::image::Image;
 use nalgebra::Isometry3;
 
 pub use depth::DepthImage;
@@ -40,9 +41,10 @@ pub enum RgbdError {
         /// The underlying error.
         error: std::io::Error,
     },
-    /// A colour image could not be loaded or saved (the error names the file).
+    /// A colour image could not be loaded, saved or built (`cpose-nerf`'s error names the
+    /// file).
     #[error(transparent)]
-    Image(#[from] ImageError),
+    Image(#[from] DataError),
     /// A file's content is not what the format requires.
     #[error("{}: expected {expected}, got {found}", .path.display())]
     Format {

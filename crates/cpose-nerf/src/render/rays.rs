@@ -12,12 +12,11 @@ use nalgebra::{Isometry3, Vector3};
 use rand::RngExt;
 use rayon::prelude::*;
 
-use crate::camera::{PinholeCamera, PoseGradient};
-use crate::field3d::RadianceField;
-use crate::image::Image;
-use crate::volume::{
+use super::volume::{
     Composited, LastInterval, Sampling, composite_batch, composite_batch_backward, delta,
 };
+use crate::camera::PoseGradient;
+use crate::field3d::RadianceField;
 use cpose_core::Real;
 
 /// Rays per parallel work item.
@@ -406,80 +405,6 @@ impl<S: Real> Renderer<S> {
     }
 }
 
-/// A whole view rendered at midpoint depths: the image and the depth map (`Σ w_j s_j`, camera
-/// z-depth where the opacity is 1), row-major.
-pub struct RenderedView {
-    /// Colours.
-    pub image: Image,
-    /// Expected depth per pixel.
-    pub depth: Vec<f32>,
-    /// Opacity per pixel.
-    pub opacity: Vec<f32>,
-}
-
-/// Renders every pixel of `camera` at `world_from_camera`, `chunk` rays at a time.
-pub fn render_view<S: Real>(
-    renderer: &mut Renderer<S>,
-    field: &mut dyn RadianceField<S>,
-    settings: &RenderSettings,
-    camera: &PinholeCamera,
-    world_from_camera: &Isometry3<f64>,
-    chunk: usize,
-) -> RenderedView {
-    render_view_with(
-        renderer,
-        field,
-        settings,
-        (camera.width, camera.height),
-        |x, y| camera.ray_direction_cam(x, y),
-        world_from_camera,
-        chunk,
-    )
-}
-
-/// [`render_view`] with each pixel's camera-frame direction from `direction(x, y)` (e.g. a
-/// lens with distortion).
-pub fn render_view_with<S: Real>(
-    renderer: &mut Renderer<S>,
-    field: &mut dyn RadianceField<S>,
-    settings: &RenderSettings,
-    (w, h): (usize, usize),
-    direction: impl Fn(usize, usize) -> [f64; 3],
-    world_from_camera: &Isometry3<f64>,
-    chunk: usize,
-) -> RenderedView {
-    let mut rgb = vec![0.0f32; 3 * w * h];
-    let mut depth = vec![0.0f32; w * h];
-    let mut opacity = vec![0.0f32; w * h];
-    let mut rays = Vec::with_capacity(chunk);
-    let pixels = w * h;
-    let mut start = 0;
-    while start < pixels {
-        let end = (start + chunk).min(pixels);
-        rays.clear();
-        rays.extend(
-            (start..end).map(|p| CameraRay::new(0, world_from_camera, direction(p % w, p / w))),
-        );
-        let out = renderer.forward(field, settings, &rays, None::<&mut rand_chacha::ChaCha8Rng>);
-        for (i, o) in out.iter().enumerate() {
-            for c in 0..3 {
-                rgb[3 * (start + i) + c] = o.rgb[c].to_f64() as f32;
-            }
-            depth[start + i] = o.depth.to_f64() as f32;
-            opacity[start + i] = o.opacity.to_f64() as f32;
-        }
-        start = end;
-    }
-    RenderedView {
-        image: Image::from_fn(w, h, |x, y| {
-            let i = 3 * (y * w + x);
-            [rgb[i], rgb[i + 1], rgb[i + 2]]
-        }),
-        depth,
-        opacity,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use cpose_core::geometry::se3_exp;
@@ -488,6 +413,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     use super::*;
+    use crate::camera::PinholeCamera;
     use crate::field3d::{HashGridConfig, SceneBounds};
 
     fn field() -> crate::field3d::HashGridField<f64> {

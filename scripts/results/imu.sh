@@ -1,0 +1,93 @@
+#!/bin/sh
+# The tables of docs/results/imu.md: RGB-D SLAM with an IMU (task slam_imu) on the synthetic room
+# at 5 Hz with a simulated IMU, and on a hall rendered along the real EuRoC V1_02 flight with its
+# real IMU; the relative family (prev, prev_loose …) and the absolute PoseNet (none, loose …).
+# The fits of pose fields to the real gyroscope are scripts/results/trajectory.sh.
+#
+#   scripts/results/imu.sh [TABLE...]
+#
+# TABLE is synthetic, euroc, windows, windows_gyro or iterations (default: all, in that order).
+# Runs go to runs/results/imu/NAME (common.sh: environment); a finished run is kept and an
+# interrupted one resumed. The tables are printed to stdout. One EuRoC run of all eleven methods
+# takes about 1.5 hours on two cores.
+set -eu
+# shellcheck source=common.sh
+. "$(dirname "$0")/common.sh"
+out=${CPOSE_RESULTS:-runs/results}/imu
+room=configs/synthetic_imu.toml
+euroc=configs/euroc_v102_imu.toml
+euroc_windows=configs/euroc_v102_imu_windows.toml
+euroc_data="euroc.path=\"$data/euroc/V1_02_excerpt\""
+absolute='slam.methods=["none","loose","tight","accel","combined"]'
+relative='slam.methods=["baseline","prev","prev_loose","prev_tight","prev_accel","prev_combined"]'
+metrics=ate_rmse_cm,first_lost,lost_frames
+
+# windows NAME CONFIG [ARGS...]: NAME with the absolute PoseNet in windows of 2 s (3 bands) and
+# the gyroscope's weight at a tenth; ARGS add the rotation rate (a fifth of the config's).
+windows() {
+    windows_name=$1
+    windows_config=$2
+    shift 2
+    run "$windows_name" "$windows_config" --set imu.window_secs=2 --set imu.window_bands=3 \
+        --set imu.gyro_weight=0.1 "$@"
+}
+
+table_synthetic() {
+    run synthetic "$room"
+    table "Synthetic room at 5 Hz, simulated IMU (configs/synthetic_imu.toml)" "$metrics" \
+        "$out/synthetic"
+}
+
+table_euroc() {
+    run euroc "$euroc" --set "$euroc_data"
+    run euroc-5hz "$euroc" --set "$euroc_data" --set data.stride=2 --set "$relative"
+    table "EuRoC V1_02 at 10 Hz and, every second frame, 5 Hz (configs/euroc_v102_imu.toml)" \
+        "$metrics" "$out/euroc" "$out/euroc-5hz"
+}
+
+table_windows() {
+    run euroc-windows "$euroc" --set "$euroc_data" --set "$absolute" \
+        --set imu.window_secs=2 --set imu.window_bands=3
+    run euroc-windows-40 "$euroc" --set "$euroc_data" --set "$absolute" \
+        --set imu.window_secs=2 --set imu.window_bands=3 --set tracking.iterations=40
+    table "The absolute PoseNet in windows of 2 s (EuRoC, 10 Hz; one network: table euroc)" \
+        "$metrics" "$out/euroc-windows" "$out/euroc-windows-40"
+}
+
+table_windows_gyro() {
+    dirs=
+    for seed in 0 1 2 3; do
+        run "euroc-windows-gyro-s$seed" "$euroc_windows" --set "$euroc_data" \
+            --set "run.seed=$seed"
+        dirs="$dirs $out/euroc-windows-gyro-s$seed"
+    done
+    for seed in 1 2 3; do
+        run "euroc-baseline-s$seed" "$euroc" --set "$euroc_data" \
+            --set 'slam.methods=["baseline"]' --set "run.seed=$seed"
+        dirs="$dirs $out/euroc-baseline-s$seed"
+    done
+    for seed in 0 1; do
+        windows "room-windows-gyro-s$seed" "$room" --set "$absolute" \
+            --set imu.lr_rotation=1e-4 --set "run.seed=$seed"
+        dirs="$dirs $out/room-windows-gyro-s$seed"
+    done
+    # shellcheck disable=SC2086
+    table "Windows of 2 s, gyroscope weight 0.1 (configs/euroc_v102_imu_windows.toml; the room)" \
+        "$metrics" $dirs
+}
+
+table_iterations() {
+    methods='slam.methods=["baseline","prev","prev_loose","prev_combined",'
+    methods=$methods'"none","loose","tight","accel","combined"]'
+    for iterations in 40 80; do
+        windows "room-windows-gyro-$iterations" "$room" --set "$methods" \
+            --set imu.lr_rotation=1e-4 --set "tracking.iterations=$iterations"
+    done
+    table "The synthetic room with 40 and 80 tracking iterations (windows, gyroscope at 0.1)" \
+        "$metrics" "$out/room-windows-gyro-40" "$out/room-windows-gyro-80"
+}
+
+tables=$(tables_from "synthetic euroc windows windows_gyro iterations" "$@")
+for t in $tables; do
+    "table_$t"
+done

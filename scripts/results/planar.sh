@@ -1,0 +1,35 @@
+#!/bin/sh
+# The tables of docs/results/planar.md: the paper's 2-D image-alignment study (20 smooth rigid
+# motions, PoseNet against BARF and the B-spline baseline) on the procedural texture and on the
+# paper's two photographs, cat (BARF's) and girl.
+#
+#   scripts/results/planar.sh [TABLE...]
+#
+# TABLE is procedural, cat or girl (default: all three). Runs go to runs/results/planar/NAME
+# (common.sh: environment); a finished run is kept and an interrupted one resumed. The tables are
+# printed to stdout.
+set -eu
+# shellcheck source=common.sh
+. "$(dirname "$0")/common.sh"
+out=${CPOSE_RESULTS:-runs/results}/planar
+metrics=corner_err_px,corner_err_px_median,success_rate,psnr_db,wall_s
+
+table_procedural() {
+    run procedural configs/planar.toml
+    table "Procedural texture (configs/planar.toml)" "$metrics" "$out/procedural"
+}
+
+table_cat() {
+    run cat configs/planar_cat.toml --set "image.path=\"$data/planar/cat.jpg\""
+    table "BARF's cat (configs/planar_cat.toml)" "$metrics" "$out/cat"
+}
+
+table_girl() {
+    run girl configs/planar_cat.toml --set "image.path=\"$data/planar/girl.jpg\""
+    table "The girl photograph (configs/planar_cat.toml with image.path)" "$metrics" "$out/girl"
+}
+
+tables=$(tables_from "procedural cat girl" "$@")
+for t in $tables; do
+    "table_$t"
+done
