@@ -12,6 +12,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
+use cpose_core::study::format_json_number;
 use serde_json::{Number, Value};
 
 /// One row: its name and its cells by column (`None`: `null`).
@@ -57,7 +58,7 @@ pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<Str
         out.push_str(&format!("| {name} |"));
         for n in &names {
             match cells.get(n) {
-                Some(Some(v)) => out.push_str(&format!(" {} |", format_cell(v))),
+                Some(Some(v)) => out.push_str(&format!(" {} |", format_json_number(v))),
                 _ => out.push_str(" |"),
             }
         }
@@ -97,29 +98,6 @@ fn collect_rows(value: &Value, run: &str, path: &str, rows: &mut Vec<Row>) {
             };
             collect_rows(v, run, &path, rows);
         }
-    }
-}
-
-/// An integer as it is (`500`, not `500.0`); other numbers by [`format_number`].
-fn format_cell(v: &Number) -> String {
-    if v.is_i64() || v.is_u64() {
-        v.to_string()
-    } else {
-        v.as_f64().map_or_else(|| v.to_string(), format_number)
-    }
-}
-
-/// Four significant digits, no exponent for ordinary magnitudes.
-fn format_number(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return v.to_string();
-    }
-    let magnitude = v.abs().log10().floor() as i32;
-    if (-3..6).contains(&magnitude) {
-        let decimals = (3 - magnitude).max(0) as usize;
-        format!("{v:.decimals$}")
-    } else {
-        format!("{v:.3e}")
     }
 }
 

@@ -229,6 +229,22 @@ impl Reader {
             .collect())
     }
 
+    /// An array written by [`Writer::f32s`] into `out`, which must have its length; `what` names
+    /// the array in the error.
+    pub fn f32s_into(&mut self, out: &mut [f32], what: &str) -> anyhow::Result<()> {
+        let v = self.f32s()?;
+        if v.len() != out.len() {
+            bail!(
+                "{}: the checkpoint's {what} has {} parameters, this one {}",
+                self.path.display(),
+                v.len(),
+                out.len()
+            );
+        }
+        out.copy_from_slice(&v);
+        Ok(())
+    }
+
     /// Restores parameters written by [`Writer::pose_field`] into a field of the same shape.
     pub fn pose_field(&mut self, field: &mut dyn PoseField) -> anyhow::Result<()> {
         let n = self.u64()?;
@@ -241,16 +257,9 @@ impl Reader {
         }
         let mut result = Ok(());
         field.params_mut(&mut |_, p| {
-            if result.is_err() {
-                return;
+            if result.is_ok() {
+                result = self.f32s_into(p, "pose field");
             }
-            result = self.f32s().and_then(|v| {
-                if v.len() != p.len() {
-                    bail!("{}: corrupt pose-field parameters", self.path.display());
-                }
-                p.copy_from_slice(&v);
-                Ok(())
-            });
         });
         result
     }

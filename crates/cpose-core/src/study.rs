@@ -520,26 +520,33 @@ impl<'a> Study<'a> {
     }
 }
 
-/// A value for a table cell: integers as integers, other numbers with 4 significant digits.
+/// A value for a table cell: integers as integers, other numbers by [`format_number`].
 pub fn format_value(v: &Value) -> String {
     match v {
-        Value::Number(n) if n.is_i64() || n.is_u64() => n.to_string(),
-        Value::Number(n) => n.as_f64().map_or(String::new(), format_number),
+        Value::Number(n) => format_json_number(n),
         Value::Null => "-".into(),
         Value::String(s) => s.clone(),
         other => other.to_string(),
     }
 }
 
-/// A number with 4 significant digits (scientific notation when very small or large); whole
-/// numbers print without a fraction.
-pub fn format_number(v: f64) -> String {
-    if v == v.trunc() && v.abs() < 1e15 {
-        return format!("{v:.0}");
+/// A JSON number: an integer as it is (`500`, not `500.0`), others by [`format_number`].
+pub fn format_json_number(n: &serde_json::Number) -> String {
+    if n.is_i64() || n.is_u64() {
+        n.to_string()
+    } else {
+        n.as_f64().map_or_else(|| n.to_string(), format_number)
     }
-    let a = v.abs();
-    if (1e-3..1e6).contains(&a) {
-        let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
+}
+
+/// Four significant digits, no exponent for ordinary magnitudes.
+pub fn format_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return v.to_string();
+    }
+    let magnitude = v.abs().log10().floor() as i32;
+    if (-3..6).contains(&magnitude) {
+        let decimals = (3 - magnitude).max(0) as usize;
         format!("{v:.decimals$}")
     } else {
         format!("{v:.3e}")
@@ -1176,7 +1183,7 @@ mod tests {
         assert_eq!(k.name(true), "rm-60-tm-10_lie_spline_s3");
         assert_eq!(format_value(&serde_json::json!(500)), "500");
         assert_eq!(format_value(&serde_json::json!(0.012345)), "0.01235");
-        assert_eq!(format_value(&serde_json::json!(12.0)), "12");
+        assert_eq!(format_value(&serde_json::json!(12.0)), "12.00");
         assert_eq!(format_value(&serde_json::json!(1.5e-7)), "1.500e-7");
         assert_eq!(format_value(&Value::Null), "-");
         let m = mean_over_seeds(&[

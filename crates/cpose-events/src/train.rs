@@ -502,16 +502,7 @@ impl<'a> EventTrainer<'a> {
     /// Restores what [`EventTrainer::write_state`] wrote, into a trainer of the same setup; the
     /// next step continues exactly where the saved run stopped.
     pub fn read_state(&mut self, r: &mut Reader) -> anyhow::Result<()> {
-        let params = r.f32s()?;
-        if params.len() != self.field.num_params() {
-            bail!(
-                "{}: the checkpoint's field has {} parameters, this one {}",
-                r.path().display(),
-                params.len(),
-                self.field.num_params()
-            );
-        }
-        self.field.params_mut().copy_from_slice(&params);
+        r.f32s_into(self.field.params_mut(), "field")?;
         r.adam(self.optimizer.adam_mut())?;
         self.poses.read_state(r)?;
         self.rng = r.rng()?;

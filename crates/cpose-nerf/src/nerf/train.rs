@@ -260,16 +260,7 @@ impl<'a> Trainer<'a> {
     /// Restores [`Trainer::save_state`] written after `it` steps into a trainer built with the
     /// same config.
     pub fn load_state(&mut self, r: &mut Reader, it: u64) -> anyhow::Result<()> {
-        let params = r.f32s()?;
-        if params.len() != self.field.num_params() {
-            bail!(
-                "{}: the checkpoint's field has {} parameters, this one {}",
-                r.path().display(),
-                params.len(),
-                self.field.num_params()
-            );
-        }
-        self.field.params_mut().copy_from_slice(&params);
+        r.f32s_into(self.field.params_mut(), "field")?;
         let (start, steps) = field_round(
             it,
             self.schedule.field_restart_every,
