@@ -6,7 +6,7 @@
 #
 #   scripts/results/imu.sh [TABLE...]
 #
-# TABLE is synthetic, euroc, windows, windows_gyro or iterations (default: all, in that order).
+# TABLE is synthetic, euroc or windows_gyro (default: all, in that order).
 # Runs go to runs/results/imu/NAME (common.sh: environment); a finished run is kept and an
 # interrupted one resumed. The tables are printed to stdout. One EuRoC run of all eleven methods
 # takes about 1.5 hours on two cores.
@@ -45,15 +45,6 @@ table_euroc() {
         "$metrics" "$out/euroc" "$out/euroc-5hz"
 }
 
-table_windows() {
-    run euroc-windows "$euroc" --set "$euroc_data" --set "$absolute" \
-        --set imu.window_secs=2 --set imu.window_bands=3
-    run euroc-windows-40 "$euroc" --set "$euroc_data" --set "$absolute" \
-        --set imu.window_secs=2 --set imu.window_bands=3 --set tracking.iterations=40
-    table "The absolute PoseNet in windows of 2 s (EuRoC, 10 Hz; one network: table euroc)" \
-        "$metrics" "$out/euroc-windows" "$out/euroc-windows-40"
-}
-
 table_windows_gyro() {
     dirs=
     for seed in 0 1 2 3; do
@@ -76,18 +67,7 @@ table_windows_gyro() {
         "$metrics" $dirs
 }
 
-table_iterations() {
-    methods='slam.methods=["baseline","prev","prev_loose","prev_combined",'
-    methods=$methods'"none","loose","tight","accel","combined"]'
-    for iterations in 40 80; do
-        windows "room-windows-gyro-$iterations" "$room" --set "$methods" \
-            --set imu.lr_rotation=1e-4 --set "tracking.iterations=$iterations"
-    done
-    table "The synthetic room with 40 and 80 tracking iterations (windows, gyroscope at 0.1)" \
-        "$metrics" "$out/room-windows-gyro-40" "$out/room-windows-gyro-80"
-}
-
-tables=$(tables_from "synthetic euroc windows windows_gyro iterations" "$@")
+tables=$(tables_from "synthetic euroc windows_gyro" "$@")
 for t in $tables; do
     "table_$t"
 done

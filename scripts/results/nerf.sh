@@ -4,11 +4,11 @@
 #
 #   scripts/results/nerf.sh [TABLE...]
 #
-# TABLE is one of grid restarts restarts_grid llff llff_restarts llff_colmap encoding (default:
+# TABLE is one of grid restarts restarts_grid llff llff_colmap encoding (default:
 # all, in that order). Runs go to runs/results/nerf/TABLE/NAME (common.sh: environment); a
 # finished run is kept and an interrupted one resumed, so the script continues where it stopped.
-# The tables are printed to stdout. The grid alone is 13 runs of about 15 minutes each on two
-# cores; everything takes a few days.
+# The tables are printed to stdout. The grid is 13 runs of about 15 minutes each on two cores;
+# everything, about 40 runs, takes a day.
 set -eu
 # shellcheck source=common.sh
 . "$(dirname "$0")/common.sh"
@@ -64,45 +64,26 @@ table_grid() {
     done
     # shellcheck disable=SC2086
     table "The paper's noise grid (configs/nerf_synthetic.toml)" \
-        init_rot_err_deg,init_trans_err,rot_err_deg,trans_err,psnr_db,psnr_db_refined,ssim $dirs
+        init_rot_err_deg,init_trans_err_su,rot_err_deg,trans_err_su,psnr_db,psnr_refined_db,ssim $dirs
 }
 
 table_restarts() {
     d=restarts
     run $d/rm60-tm10 "$synthetic" --set "$posenet_only" \
         --set noise.max_rotation_deg=60 --set noise.max_translation=0.1
+    run $d/rm60-tm10-barf "$synthetic" --set 'train.methods=["barf"]' \
+        --set noise.max_rotation_deg=60 --set noise.max_translation=0.1
     for seed in 0 1 2; do
-        restarts "$d/rm60-tm10-restarts-warmup10-s$seed" "$synthetic" --set "$posenet_only" \
-            --set noise.max_rotation_deg=60 --set noise.max_translation=0.1 \
-            --set train.rotation_warmup=0.1 --set "run.seed=$seed"
         restarts "$d/rm60-tm10-restarts-s$seed" "$synthetic" --set "$posenet_only" \
             --set noise.max_rotation_deg=60 --set noise.max_translation=0.1 --set "run.seed=$seed"
     done
-    run $d/rm60-tm10-barf "$synthetic" --set 'train.methods=["barf"]' \
-        --set noise.max_rotation_deg=60 --set noise.max_translation=0.1
-    restarts $d/rm60-tm10-barf-restarts "$synthetic" --set 'train.methods=["barf"]' \
-        --set noise.max_rotation_deg=60 --set noise.max_translation=0.1 \
-        --set 'train.lr_pose=[1e-3,1e-4]'
-    restarts $d/rm30-tm10-restarts "$synthetic" --set "$posenet_only" \
-        --set noise.max_rotation_deg=30 --set noise.max_translation=0.1
     restarts $d/rm60-tm20-restarts "$synthetic" --set "$posenet_only" \
         --set noise.max_rotation_deg=60 --set noise.max_translation=0.2
-    restarts $d/rm60-tm20-restarts-until75 "$synthetic" --set "$posenet_only" \
-        --set noise.max_rotation_deg=60 --set noise.max_translation=0.2 \
-        --set train.field_restart_until=0.75
-    restarts $d/rm60-tm20-restarts-every500 "$synthetic" --set "$posenet_only" \
-        --set noise.max_rotation_deg=60 --set noise.max_translation=0.2 \
-        --set train.field_restart_every=500
-    table "Field restarts at RM 60° + TM 10% and beside it (PoseNet unless named)" \
-        rot_err_deg,trans_err,psnr_db,psnr_db_refined \
-        "$out/$d/rm60-tm10" \
-        "$out/$d/rm60-tm10-restarts-warmup10-s0" "$out/$d/rm60-tm10-restarts-warmup10-s1" \
-        "$out/$d/rm60-tm10-restarts-warmup10-s2" \
-        "$out/$d/rm60-tm10-restarts-s0" "$out/$d/rm60-tm10-restarts-s1" \
-        "$out/$d/rm60-tm10-restarts-s2" \
-        "$out/$d/rm60-tm10-barf" "$out/$d/rm60-tm10-barf-restarts" \
-        "$out/$d/rm30-tm10-restarts" "$out/$d/rm60-tm20-restarts" \
-        "$out/$d/rm60-tm20-restarts-until75" "$out/$d/rm60-tm20-restarts-every500"
+    table "Field restarts at RM 60° + TM 10% and 20% (PoseNet unless named)" \
+        rot_err_deg,trans_err_su,psnr_db,psnr_refined_db \
+        "$out/$d/rm60-tm10" "$out/$d/rm60-tm10-barf" "$out/$d/rm60-tm10-restarts-s0" \
+        "$out/$d/rm60-tm10-restarts-s1" "$out/$d/rm60-tm10-restarts-s2" \
+        "$out/$d/rm60-tm20-restarts"
 }
 
 table_restarts_grid() {
@@ -117,7 +98,7 @@ table_restarts_grid() {
     done
     # shellcheck disable=SC2086
     table "Field restarts on the cells where PoseNet fails without them" \
-        rot_err_deg,trans_err,psnr_db,psnr_db_refined $dirs
+        rot_err_deg,trans_err_su,psnr_db,psnr_refined_db $dirs
 }
 
 table_llff() {
@@ -125,20 +106,8 @@ table_llff() {
     run llff/fern-2 "$fern" --set "$fern_data" --set data.subsample=2
     run llff/fern-4 "$fern" --set "$fern_data" --set data.subsample=4
     table "LLFF fern from unknown poses (configs/llff_fern.toml)" \
-        rot_err_deg,rot_err_relative_deg,trans_err,psnr_db,psnr_db_refined,wall_s \
+        rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db,wall_s \
         "$out/llff/fern" "$out/llff/fern-2" "$out/llff/fern-4"
-}
-
-table_llff_restarts() {
-    restarts llff_restarts/fern-restarts "$fern" --set "$fern_data" --set "$posenet_only"
-    restarts llff_restarts/fern-2-restarts "$fern" --set "$fern_data" --set "$posenet_only" \
-        --set data.subsample=2
-    restarts llff_restarts/fern-4-restarts "$fern" --set "$fern_data" --set "$posenet_only" \
-        --set data.subsample=4
-    table "LLFF fern with field restarts (PoseNet)" \
-        rot_err_deg,rot_err_relative_deg,trans_err,psnr_db,psnr_db_refined,wall_s \
-        "$out/llff_restarts/fern-restarts" "$out/llff_restarts/fern-2-restarts" \
-        "$out/llff_restarts/fern-4-restarts"
 }
 
 table_llff_colmap() {
@@ -154,7 +123,7 @@ table_llff_colmap() {
     rotation=init_rot_err_deg,init_rot_err_relative_deg,rot_err_deg,rot_err_relative_deg
     # shellcheck disable=SC2086
     table "LLFF fern from COLMAP's poses turned by up to R degrees" \
-        "$rotation,trans_err,psnr_db_refined" $dirs
+        "$rotation,trans_err_su,psnr_refined_db" $dirs
 }
 
 table_encoding() {
@@ -170,13 +139,13 @@ table_encoding() {
     run $d/f10-c2f "$synthetic" --set "$posenet_only" --set posenet.bands=10 \
         --set 'posenet.c2f=[0.1,0.5]'
     table "PoseNet's encoding at RM 30° + TM 10% (configs/nerf_synthetic.toml)" \
-        rot_err_deg,trans_err,psnr_db,psnr_db_refined \
+        rot_err_deg,trans_err_su,psnr_db,psnr_refined_db \
         "$out/$d/linear-coupled" "$out/$d/f2-coupled" "$out/$d/f5-coupled" \
         "$out/$d/f10-coupled" "$out/$d/f2" "$out/$d/f5" "$out/$d/f10" "$out/$d/sigmoid" \
         "$out/$d/f10-c2f"
 }
 
-tables=$(tables_from "grid restarts restarts_grid llff llff_restarts llff_colmap encoding" "$@")
+tables=$(tables_from "grid restarts restarts_grid llff llff_colmap encoding" "$@")
 for t in $tables; do
     "table_$t"
 done

@@ -12,7 +12,7 @@ set -eu
 # shellcheck source=common.sh
 . "$(dirname "$0")/common.sh"
 out=${CPOSE_RESULTS:-runs/results}/planar
-metrics=corner_err_px,corner_err_px_median,success_rate,psnr_db,wall_s
+metrics=corner_err_px,corner_err_median_px,success_rate,psnr_db,wall_s
 
 table_procedural() {
     run procedural configs/planar.toml

@@ -46,7 +46,7 @@ fn fit(input: &TaskInput) -> anyhow::Result<()> {
     let mut out = PoseBatch::default();
     field.evaluate(&[1.0], Order::Pose, &mut out)?;
     let metrics = serde_json::json!({
-        "posenet": { "iterations": iterations, "seed": input.run.seed, "trans_err": out.translation[0].x },
+        "posenet": { "iterations": iterations, "seed": input.run.seed, "trans_err_m": out.translation[0].x },
     });
     input.run_dir.write_json("metrics.json", &metrics)?;
     input.run_dir.log("fitted");
@@ -168,7 +168,7 @@ fn run_writes_the_run_folder() {
     let metrics: serde_json::Value = serde_json::from_str(&read(out.join("metrics.json"))).unwrap();
     assert_eq!(metrics["posenet"]["iterations"], 10);
     assert_eq!(metrics["posenet"]["seed"], 5);
-    assert_eq!(metrics["posenet"]["trans_err"], 0.5);
+    assert_eq!(metrics["posenet"]["trans_err_m"], 0.5);
     let log = read(out.join("log.txt"));
     assert!(
         log.contains("task zz_cli_fit with config")

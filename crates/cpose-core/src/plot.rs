@@ -819,7 +819,8 @@ fn wants_log_scale(values: impl Iterator<Item = f64>) -> bool {
 
 /// `rot_err_deg` → "rot_err (°)", `loss` on a log axis → "loss (log scale)".
 fn metric_axis_label(metric: &str, y_scale: YScale) -> String {
-    const SUFFIXES: [(&str, &str); 7] = [
+    const SUFFIXES: [(&str, &str); 9] = [
+        ("_rad_s", "rad/s"),
         ("_deg", "°"),
         ("_cm", "cm"),
         ("_mm", "mm"),
@@ -827,6 +828,7 @@ fn metric_axis_label(metric: &str, y_scale: YScale) -> String {
         ("_s", "s"),
         ("_db", "dB"),
         ("_px", "px"),
+        ("_su", "scene units"),
     ];
     let (name, unit) = SUFFIXES
         .iter()
@@ -1822,6 +1824,14 @@ mod tests {
         assert_eq!(
             metric_axis_label("corner_err_px", YScale::Log),
             "corner_err (px, log scale)"
+        );
+        assert_eq!(
+            metric_axis_label("ang_vel_rmse_rad_s", YScale::Linear),
+            "ang_vel_rmse (rad/s)"
+        );
+        assert_eq!(
+            metric_axis_label("trans_err_su", YScale::Linear),
+            "trans_err (scene units)"
         );
         assert!(wants_log_scale([1.0, 1e-3].into_iter()));
         assert!(!wants_log_scale([1.0, 0.5].into_iter()));

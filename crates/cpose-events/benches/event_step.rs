@@ -14,7 +14,7 @@ use cpose_events::loss::EventLoss;
 use cpose_events::simulate::{SyntheticEventsConfig, simulate_eventnerf_scene};
 use cpose_events::train::{EventSchedule, EventTrainer, InitialPath, KeyedPoses};
 use cpose_nerf::field3d::{RadianceFieldConfig, SceneBounds};
-use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
+use cpose_nerf::poses::{FramePoses, PoseSchedules};
 use cpose_nerf::render::{Clip, LastInterval, RenderSettings, Sampling};
 use cpose_nerf::scene::SyntheticScene;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};

@@ -37,7 +37,7 @@
 //! `cpose run --resume` continues exactly.
 //!
 //! Outputs, besides the study's (`metrics.json` as `{condition: {method: {rot_err_deg,
-//! trans_err, …, psnr_db, ssim, final_loss, wall_s}}}`, `curves.csv`, `units/`):
+//! trans_err_su, …, psnr_db, ssim, final_loss, wall_s}}}`, `curves.csv`, `units/`):
 //! - `traj_gt.txt`: the truth at the evaluation times (TUM);
 //! - `traj_<condition>_<method>.txt`: the method's path there (TUM);
 //! - `trajectory_<condition>_<method>.png`: truth, initial and learnt path seen from above;
@@ -60,7 +60,7 @@ use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::{Image, psnr};
 use cpose_nerf::metrics::ssim;
-use cpose_nerf::nerf::poses::{FramePoses, PoseSchedules};
+use cpose_nerf::poses::{FramePoses, PoseSchedules};
 use cpose_nerf::render::{
     Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view_with,
 };
@@ -461,12 +461,12 @@ fn conditions(exp: &Experiment, rec: &Recording) -> anyhow::Result<Vec<Condition
 struct MethodResult {
     /// Mean rotation / translation error against the truth at the evaluation times.
     rot_err_deg: f64,
-    trans_err: f64,
-    max_trans_err: f64,
+    trans_err_su: f64,
+    trans_err_max_su: f64,
     /// The same after BARF's Procrustes alignment (a similarity: events fix neither the
     /// scene's scale nor its frame).
-    rot_err_deg_aligned: f64,
-    trans_err_aligned: f64,
+    rot_err_aligned_deg: f64,
+    trans_err_aligned_su: f64,
     /// Held-out views after colour correction.
     psnr_db: Option<f64>,
     ssim: Option<f64>,
@@ -620,9 +620,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     Study::new(input, units)
         .columns(&[
             "rot_err_deg",
-            "trans_err",
-            "rot_err_deg_aligned",
-            "trans_err_aligned",
+            "trans_err_su",
+            "rot_err_aligned_deg",
+            "trans_err_aligned_su",
             "psnr_db",
             "ssim",
             "final_loss",
@@ -742,7 +742,7 @@ fn run_method(
                 &[
                     ("loss", mean_loss(&recent, done)),
                     ("rot_err_deg", rot),
-                    ("trans_err", trans),
+                    ("trans_err_su", trans),
                 ],
             );
         }
@@ -894,10 +894,10 @@ fn evaluate(
     }
     Ok(MethodResult {
         rot_err_deg,
-        trans_err,
-        max_trans_err,
-        rot_err_deg_aligned: aligned.rot_err_deg,
-        trans_err_aligned: aligned.trans_err,
+        trans_err_su: trans_err,
+        trans_err_max_su: max_trans_err,
+        rot_err_aligned_deg: aligned.rot_err_deg,
+        trans_err_aligned_su: aligned.trans_err,
         psnr_db,
         ssim: ssim_mean,
         final_loss,

@@ -30,9 +30,9 @@ use anyhow::bail;
 use cpose_core::Timestamp;
 use cpose_core::checkpoint::{Reader, Writer};
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
+use cpose_nerf::field3d::FieldOptimizer;
 use cpose_nerf::field3d::RadianceField;
-use cpose_nerf::nerf::poses::FramePoses;
-use cpose_nerf::nerf::train::FieldOptimizer;
+use cpose_nerf::poses::FramePoses;
 use cpose_nerf::render::{CameraRay, Composited, RenderSettings, Renderer};
 use nalgebra::{Isometry3, Quaternion, Translation3, Vector3};
 use rand::{RngExt, SeedableRng};
@@ -586,7 +586,7 @@ mod tests {
             lr_end: 0.0,
             max_iter: 1,
         };
-        let schedules = cpose_nerf::nerf::poses::PoseSchedules {
+        let schedules = cpose_nerf::poses::PoseSchedules {
             rotation: decay,
             translation: decay,
             pose: decay,
@@ -684,7 +684,7 @@ mod tests {
                 lr_end: 1e-4,
                 max_iter: 6,
             };
-            let schedules = cpose_nerf::nerf::poses::PoseSchedules {
+            let schedules = cpose_nerf::poses::PoseSchedules {
                 rotation: decay,
                 translation: decay,
                 pose: decay,

@@ -55,6 +55,7 @@
 
 mod grid;
 mod mlp;
+mod optimizer;
 
 use std::ops::Range;
 
@@ -67,6 +68,7 @@ use crate::field_common::{Invalid, grow, invalid};
 
 pub use grid::{GRID_DENSITY_BIAS, HashGridConfig, HashGridField, Interpolation};
 pub use mlp::{NerfMlpConfig, NerfMlpField};
+pub use optimizer::FieldOptimizer;
 
 /// A 3-D radiance field: world point → density `σ ≥ 0` and colour `rgb ∈ (0, 1)³`.
 pub trait RadianceField<S: Real = f32>: Send {

@@ -41,15 +41,14 @@
 //! many degrees ([`ReflectionFix`]); the log and `metrics.json` then also give BARF's reading.
 //!
 //! Outputs: `metrics.json`
-//! (`{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err, psnr_db, ssim, …}}}`),
+//! (`{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err_su, psnr_db, ssim, …}}}`),
 //! `traj_<condition>_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`,
 //! `traj_init.txt` (TUM), `trajectory_<condition>_<method>.png` (true, initial and estimated
 //! training cameras in evo_traj's layout, [`cpose_core::plot::trajectory_comparison`]),
-//! `view<k>_<condition>_<method>.png` (rendered | truth), `depth<k>_<condition>_<method>.png`,
+//! `view_<k>_<condition>_<method>.png` (rendered | truth), `depth_<k>_<condition>_<method>.png`,
 //! and the study's `curves.csv`, `curves.png` and `units/` ([`cpose_core::study`]).
 
 pub mod eval;
-pub mod poses;
 pub mod train;
 
 use std::collections::BTreeMap;
@@ -72,12 +71,12 @@ use crate::data::{Dataset, blender, llff};
 use crate::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use crate::image::Image;
 use crate::metrics::ssim;
+use crate::poses::{FramePoses, PoseSchedules};
 use crate::render::{
     Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view,
 };
 use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
 use eval::Refinement;
-use poses::{FramePoses, PoseSchedules};
 use train::{Schedule, Trainer};
 
 inventory::submit! {
@@ -561,22 +560,22 @@ struct MethodResult {
     /// ([`cpose_core::eval::BarfPoseErrors::rot_err_relative_deg`]), degrees.
     rot_err_relative_deg: f64,
     /// Mean translation error after alignment, scene units.
-    trans_err: f64,
+    trans_err_su: f64,
     /// Only when the centres' best orthogonal map was a reflection: the errors with BARF's own
     /// third-row fix, for comparison with BARF's code ([`ReflectionFix::BarfThirdRow`]).
     #[serde(skip_serializing_if = "Option::is_none")]
-    rot_err_deg_barf_fix: Option<f64>,
+    rot_err_barf_fix_deg: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    trans_err_barf_fix: Option<f64>,
+    trans_err_barf_fix_su: Option<f64>,
     /// The same errors of the initial poses (none when they all coincide: unknown poses).
     init_rot_err_deg: Option<f64>,
     init_rot_err_relative_deg: Option<f64>,
-    init_trans_err: Option<f64>,
+    init_trans_err_su: Option<f64>,
     /// Held-out views rendered from the aligned true poses.
     psnr_db: f64,
     ssim: f64,
     /// With test-time photometric refinement of each test pose.
-    psnr_db_refined: Option<f64>,
+    psnr_refined_db: Option<f64>,
     ssim_refined: Option<f64>,
     /// Mean squared error of the last 100 training steps.
     final_loss: f64,
@@ -731,10 +730,10 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         .columns(&[
             "rot_err_deg",
             "rot_err_relative_deg",
-            "trans_err",
+            "trans_err_su",
             "psnr_db",
             "ssim",
-            "psnr_db_refined",
+            "psnr_refined_db",
         ])
         .run(|unit| {
             let method = *train
@@ -881,7 +880,7 @@ fn train_steps(
                     ("loss", loss),
                     ("psnr_train_db", -10.0 * loss.log10()),
                     ("rot_err_deg", errors.0),
-                    ("trans_err", errors.1),
+                    ("trans_err_su", errors.1),
                 ],
             );
         }
@@ -986,7 +985,7 @@ fn evaluate(
         if k < exp.eval.saved_views {
             view.image
                 .beside(image)
-                .save_png(unit.file(&format!("view{k}"), "png"))?;
+                .save_png(unit.file(&format!("view_{k}"), "png"))?;
             depth_image(
                 views.camera.width,
                 views.camera.height,
@@ -995,7 +994,7 @@ fn evaluate(
                 near,
                 far,
             )
-            .save_png(unit.file(&format!("depth{k}"), "png"))?;
+            .save_png(unit.file(&format!("depth_{k}"), "png"))?;
         }
         if refinement.iterations > 0 {
             let refined = eval::refine_pose(
@@ -1025,15 +1024,15 @@ fn evaluate(
     Ok(MethodResult {
         rot_err_deg: errors.rot_err_deg,
         rot_err_relative_deg: errors.rot_err_relative_deg,
-        trans_err: errors.trans_err,
-        rot_err_deg_barf_fix: barf_fix.as_ref().map(|e| e.rot_err_deg),
-        trans_err_barf_fix: barf_fix.as_ref().map(|e| e.trans_err),
+        trans_err_su: errors.trans_err,
+        rot_err_barf_fix_deg: barf_fix.as_ref().map(|e| e.rot_err_deg),
+        trans_err_barf_fix_su: barf_fix.as_ref().map(|e| e.trans_err),
         init_rot_err_deg: init_errors.as_ref().map(|e| e.rot_err_deg),
         init_rot_err_relative_deg: init_errors.as_ref().map(|e| e.rot_err_relative_deg),
-        init_trans_err: init_errors.as_ref().map(|e| e.trans_err),
+        init_trans_err_su: init_errors.as_ref().map(|e| e.trans_err),
         psnr_db: psnr / n,
         ssim: ssim_sum / n,
-        psnr_db_refined: refined.then_some(psnr_ref / n),
+        psnr_refined_db: refined.then_some(psnr_ref / n),
         ssim_refined: refined.then_some(ssim_ref / n),
         final_loss,
         iterations,

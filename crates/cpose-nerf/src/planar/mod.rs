@@ -495,7 +495,7 @@ fn summarise(runs: &[&Metrics]) -> Metrics {
     errs.sort_by(f64::total_cmp);
     Metrics::new()
         .with("corner_err_px", errs.iter().sum::<f64>() / n)
-        .with("corner_err_px_median", median(&errs))
+        .with("corner_err_median_px", median(&errs))
         .with("psnr_db", values("psnr_db").iter().sum::<f64>() / n)
         .with(
             "success_rate",
@@ -550,7 +550,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         .report_every(200)
         .columns(&[
             "corner_err_px",
-            "corner_err_px_median",
+            "corner_err_median_px",
             "psnr_db",
             "success_rate",
         ])
