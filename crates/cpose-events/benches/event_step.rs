@@ -56,6 +56,7 @@ fn bench(c: &mut Criterion) {
             rotation: decay,
             translation: decay,
             pose: decay,
+            hold: 0,
             warmup: 0,
             rotation_warmup: 0,
         },

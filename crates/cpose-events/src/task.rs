@@ -60,7 +60,7 @@ use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::{Image, psnr};
 use cpose_nerf::metrics::ssim;
-use cpose_nerf::poses::{FramePoses, PoseSchedules};
+use cpose_nerf::poses::{FramePoses, PoseSchedules, PoseTiming};
 use cpose_nerf::render::{
     Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view_with,
 };
@@ -245,7 +245,10 @@ struct TrainConfig {
     /// PoseNet: `[start, end]` for the translation and rotation networks.
     posenet_lr_translation: [f64; 2],
     posenet_lr_rotation: [f64; 2],
-    /// Fraction of the steps over which the pose learning rates ramp up from 0.
+    /// Fraction of the steps during which the poses are held while the field fits the given
+    /// poses ([`PoseSchedules::hold`]).
+    pose_hold: f64,
+    /// Fraction of the steps after the hold over which the pose learning rates ramp up from 0.
     pose_warmup: f64,
     /// Weight of the anchor at the known views.
     anchor_weight: f64,
@@ -270,6 +273,7 @@ impl Default for TrainConfig {
             ]),
             posenet_lr_translation: [1e-3, 1e-5],
             posenet_lr_rotation: [2e-4, 2e-6],
+            pose_hold: 0.0,
             pose_warmup: 0.1,
             anchor_weight: 1.0,
             anchor_windows: 0.0,
@@ -542,12 +546,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     if !(threshold > 0.0 && train.eps > 0.0) {
         bail!("[train]: need threshold > 0 and eps > 0");
     }
-    if !(0.0..=1.0).contains(&train.pose_warmup) {
-        bail!(
-            "[train] pose_warmup = {} must lie in [0, 1]",
-            train.pose_warmup
-        );
-    }
+    let timing = PoseTiming {
+        hold: train.pose_hold,
+        warmup: train.pose_warmup,
+        rotation_warmup: train.pose_warmup,
+    };
+    timing.steps(input.run.iterations(train.iterations))?;
     let mut methods: Vec<Method> = Vec::new();
     for &m in &train.methods {
         if !methods.contains(&m) {
@@ -677,13 +681,19 @@ fn run_method(
     };
     // Every method draws the same windows (`anchor_windows` among them); the anchor term acts
     // only on a correction.
-    let warmup = (train.pose_warmup * iterations as f64).round() as u64;
+    let (hold, warmup, rotation_warmup) = PoseTiming {
+        hold: train.pose_hold,
+        warmup: train.pose_warmup,
+        rotation_warmup: train.pose_warmup,
+    }
+    .steps(iterations)?;
     let schedules = PoseSchedules {
         rotation: decay(train.posenet_lr_rotation, iterations),
         translation: decay(train.posenet_lr_translation, iterations),
         pose: decay(train.posenet_lr_translation, iterations),
+        hold,
         warmup,
-        rotation_warmup: warmup,
+        rotation_warmup,
     };
     let mut poses = FramePoses::new(Vec::new(), Vec::new(), correction, schedules);
     let schedule = EventSchedule {

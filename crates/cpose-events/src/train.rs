@@ -447,7 +447,7 @@ impl<'a> EventTrainer<'a> {
         }
 
         self.grad_params.fill(0.0);
-        let trainable = self.poses.is_trainable();
+        let trainable = self.poses.is_trained_at(it);
         self.pose_grads.clear();
         self.pose_grads
             .resize(self.times.len(), PoseGradient::new());
@@ -590,6 +590,7 @@ mod tests {
             rotation: decay,
             translation: decay,
             pose: decay,
+            hold: 0,
             warmup: 0,
             rotation_warmup: 0,
         };
@@ -688,6 +689,7 @@ mod tests {
                 rotation: decay,
                 translation: decay,
                 pose: decay,
+                hold: 0,
                 warmup: 0,
                 rotation_warmup: 0,
             };

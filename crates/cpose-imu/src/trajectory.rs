@@ -22,7 +22,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use cpose_core::config::Config;
 use cpose_core::eval::{self, Trajectory};
-use cpose_core::nn::{Adam, ExponentialDecay};
+use cpose_core::nn::{Adam, Convergence, StopReason, StopRule};
 use cpose_core::plot::{self, Line, Panel, SeriesStyle, TrajectorySeries, YScale};
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
@@ -114,8 +114,20 @@ fn default_known_every() -> usize {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct FitConfig {
-    /// Adam steps per fit (scaled by `[run] iterations_scale`).
+    /// The step budget of a fit (scaled by `[run] iterations_scale`); it stops sooner on the
+    /// tolerance or a plateau ([`StopRule`]).
     iterations: usize,
+    /// A fit has converged when its mean errors on the known poses are within both.
+    tolerance_deg: f64,
+    tolerance_m: f64,
+    /// Steps between convergence checks; a plateau is `plateau_steps` without a window whose
+    /// mean loss is `plateau_rel` below the best. At a plateau the learning rates fall by
+    /// `lr_factor`, up to `lr_drops` times; the next plateau ends the fit ([`StopRule`]).
+    check_every: usize,
+    plateau_steps: usize,
+    plateau_rel: f64,
+    lr_factor: f64,
+    lr_drops: usize,
     /// IMU modes to compare: `"none"`, `"loose"`, `"tight"`, `"accel"`, `"combined"`.
     imu: Vec<ImuMode>,
     /// Weight of the pose loss (squared error of quaternions and of normalised positions: about
@@ -136,14 +148,20 @@ struct FitConfig {
     lr_rotation: f64,
     /// Initial learning rate of joint pose parameters (splines, per-frame poses).
     lr_pose: f64,
-    /// Learning rates decay exponentially to `lr · lr_decay` at the last step (paper: 0.01).
-    lr_decay: f64,
 }
 
 impl Default for FitConfig {
     fn default() -> Self {
+        let stop = StopRule::default();
         Self {
-            iterations: 3000,
+            iterations: 20000,
+            tolerance_deg: 0.01,
+            tolerance_m: 1e-4,
+            check_every: stop.check_every,
+            plateau_steps: stop.plateau_steps,
+            plateau_rel: stop.plateau_rel,
+            lr_factor: stop.lr_factor,
+            lr_drops: stop.lr_drops,
             imu: vec![ImuMode::None, ImuMode::Tight],
             pose_weight: 1.0,
             gyro_weight: 1.0,
@@ -153,8 +171,42 @@ impl Default for FitConfig {
             lr_translation: 1e-3,
             lr_rotation: 2e-4,
             lr_pose: 1e-2,
-            lr_decay: 0.1,
         }
+    }
+}
+
+impl FitConfig {
+    fn stop_rule(&self) -> StopRule {
+        StopRule {
+            check_every: self.check_every,
+            plateau_steps: self.plateau_steps,
+            plateau_rel: self.plateau_rel,
+            lr_factor: self.lr_factor,
+            lr_drops: self.lr_drops,
+        }
+    }
+
+    /// Errors naming the key of a setting out of range.
+    fn validate(&self) -> Result<(), String> {
+        self.stop_rule().validate()?;
+        for (key, value) in [
+            ("tolerance_deg", self.tolerance_deg),
+            ("tolerance_m", self.tolerance_m),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!("{key} = {value} must be a number ≥ 0"));
+            }
+        }
+        for (key, value) in [
+            ("lr_translation", self.lr_translation),
+            ("lr_rotation", self.lr_rotation),
+            ("lr_pose", self.lr_pose),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("{key} = {value} must be a positive number"));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -411,6 +463,20 @@ struct MethodMetrics {
     num_params: Option<usize>,
     #[serde(skip_serializing_if = "Option::is_none")]
     final_loss: Option<f64>,
+    /// How the fit ended (none for the interpolation reference).
+    #[serde(flatten)]
+    fit: Option<FitOutcome>,
+}
+
+/// How a fit ended: its step count, why it stopped, and its mean errors on the known poses it
+/// was fitted to (within `[fit] tolerance_deg` and `tolerance_m` when it converged).
+#[derive(Debug, Serialize)]
+struct FitOutcome {
+    fit_steps: usize,
+    fit_stop: StopReason,
+    fit_converged: bool,
+    known_rot_err_deg: f64,
+    known_trans_err_m: f64,
 }
 
 /// Mean and RMSE of the rotation (degrees) and translation (metres) errors: evo's APE
@@ -572,25 +638,49 @@ struct Fit<'a> {
     norm: &'a Normalisation,
     cfg: &'a FitConfig,
     known_targets: Vec<Isometry3<f64>>,
+    /// The known poses in the world frame.
+    known_truth: &'a [Isometry3<f64>],
     /// Held-out times and poses, for the live error.
     held_times: &'a [f64],
     held_truth: &'a [Isometry3<f64>],
 }
 
 impl Fit<'_> {
-    /// Held-out rotation (degrees) and translation (metres) errors of `field` now.
-    fn held_out_errors(&self, field: &dyn PoseField) -> anyhow::Result<(f64, f64)> {
+    /// Mean rotation (degrees) and translation (metres) errors of `field` at `times` against
+    /// `truth` (world frame).
+    fn errors_at(
+        &self,
+        field: &dyn PoseField,
+        times: &[f64],
+        truth: &[Isometry3<f64>],
+    ) -> anyhow::Result<(f64, f64)> {
         let mut out = PoseBatch::default();
-        field.evaluate(self.held_times, Order::Pose, &mut out)?;
-        let estimated: Vec<Isometry3<f64>> = (0..self.held_times.len())
+        field.evaluate(times, Order::Pose, &mut out)?;
+        let estimated: Vec<Isometry3<f64>> = (0..times.len())
             .map(|i| self.norm.to_world_frame(&out.world_from_body(i)))
             .collect();
-        let (rot, _, trans, _) = pose_errors(&estimated, self.held_truth)?;
+        let (rot, _, trans, _) = pose_errors(&estimated, truth)?;
         Ok((rot, trans))
     }
 
-    /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel`, reporting the loss and the held-out
-    /// errors and checkpointing through `unit`; returns the last loss.
+    /// Errors on the held-out poses.
+    fn held_out_errors(&self, field: &dyn PoseField) -> anyhow::Result<(f64, f64)> {
+        self.errors_at(field, self.held_times, self.held_truth)
+    }
+
+    /// Errors on the known poses, which the fit is supervised with.
+    fn known_errors(&self, field: &dyn PoseField) -> anyhow::Result<(f64, f64)> {
+        self.errors_at(field, &self.seq.known_times, self.known_truth)
+    }
+
+    fn within_tolerance(&self, (rot_deg, trans_m): (f64, f64)) -> bool {
+        rot_deg <= self.cfg.tolerance_deg && trans_m <= self.cfg.tolerance_m
+    }
+
+    /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel` until the known poses are within
+    /// tolerance, the loss is on a plateau or `iterations` steps are spent ([`StopRule`]),
+    /// reporting the loss and the known and held-out errors and checkpointing through `unit`;
+    /// returns the mean loss of the last window and how the fit ended.
     fn run(
         &self,
         field: &mut dyn PoseField,
@@ -598,7 +688,9 @@ impl Fit<'_> {
         iterations: usize,
         seed: u64,
         unit: &mut Unit,
-    ) -> anyhow::Result<f64> {
+    ) -> anyhow::Result<(f64, FitOutcome)> {
+        let mut convergence = Convergence::new(self.cfg.stop_rule());
+        let mut stop = StopReason::Budget;
         let mut adam = Adam::<f32>::new(field.num_params());
         let mut grad = vec![0.0f32; field.num_params()];
         let (mut out, mut cot) = (PoseBatch::default(), PoseBatch::default());
@@ -629,19 +721,17 @@ impl Fit<'_> {
             imu_order = order.into_iter().map(|i| i as usize).collect();
             cursor = r.u64()? as usize;
             loss = r.f64()?;
+            let state = r.f64s()?;
+            convergence.set_state(state.as_slice().try_into().with_context(|| {
+                format!(
+                    "{}: the checkpoint's fit state is corrupt",
+                    r.path().display()
+                )
+            })?);
             first = done as usize;
         }
-        let decay = |lr: f64| ExponentialDecay {
-            lr0: lr,
-            lr_end: lr * self.cfg.lr_decay,
-            max_iter: iterations as u64,
-        };
-        let (lr_t, lr_r, lr_p) = (
-            decay(self.cfg.lr_translation),
-            decay(self.cfg.lr_rotation),
-            decay(self.cfg.lr_pose),
-        );
         let g = self.norm.gravity();
+        let mut steps = first;
         for it in first..iterations {
             grad.fill(0.0);
             let n = self.seq.known_times.len();
@@ -718,19 +808,37 @@ impl Fit<'_> {
                      (the last good checkpoint is kept)"
                 );
             }
-            let step = it as u64;
-            adam.step_pose_field(field, &grad, |kind| match kind {
-                ParamKind::Translation => lr_t.lr(step),
-                ParamKind::Rotation => lr_r.lr(step),
-                ParamKind::Pose => lr_p.lr(step),
+            let scale = convergence.lr_scale();
+            adam.step_pose_field(field, &grad, |kind| {
+                scale
+                    * match kind {
+                        ParamKind::Translation => self.cfg.lr_translation,
+                        ParamKind::Rotation => self.cfg.lr_rotation,
+                        ParamKind::Pose => self.cfg.lr_pose,
+                    }
             });
             let done = it + 1;
             if unit.report_due(done) {
                 let (rot, trans) = self.held_out_errors(field)?;
+                let (known_rot, known_trans) = self.known_errors(field)?;
                 unit.report(
                     done,
-                    &[("loss", loss), ("rot_err_deg", rot), ("trans_err_m", trans)],
+                    &[
+                        ("loss", loss),
+                        ("known_rot_err_deg", known_rot),
+                        ("known_trans_err_m", known_trans),
+                        ("rot_err_deg", rot),
+                        ("trans_err_m", trans),
+                    ],
                 );
+            }
+            steps = done;
+            if convergence.observe(loss) {
+                let known = self.known_errors(field)?;
+                if let Some(reason) = convergence.check(self.within_tolerance(known)) {
+                    stop = reason;
+                    break;
+                }
             }
             if done < iterations && unit.checkpoint_due() {
                 unit.checkpoint(done as u64, |w| {
@@ -740,11 +848,35 @@ impl Fit<'_> {
                     w.f64s(&imu_order.iter().map(|&i| i as f64).collect::<Vec<_>>());
                     w.u64(cursor as u64);
                     w.f64(loss);
+                    w.f64s(&convergence.state());
                     Ok(())
                 })?;
             }
         }
-        Ok(loss)
+        let known = self.known_errors(field)?;
+        let outcome = FitOutcome {
+            fit_steps: steps,
+            fit_stop: stop,
+            fit_converged: self.within_tolerance(known),
+            known_rot_err_deg: known.0,
+            known_trans_err_m: known.1,
+        };
+        let verdict = if outcome.fit_converged {
+            "within"
+        } else {
+            "warning: above"
+        };
+        unit.log(format_args!(
+            "fit stopped after {} steps ({}): known poses {:.4}° and {:.2e} m, {verdict} the \
+             tolerance {}° and {} m",
+            outcome.fit_steps,
+            stop.key(),
+            known.0,
+            known.1,
+            self.cfg.tolerance_deg,
+            self.cfg.tolerance_m
+        ));
+        Ok((convergence.last_mean().unwrap_or(loss), outcome))
     }
 }
 
@@ -755,6 +887,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let config = input.config;
     let exp: Experiment = config.parse_params()?;
     let seed = input.run.seed;
+    exp.fit
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}: [fit] {e}", config.path().display()))?;
     let seq = Sequence::new(config, &exp.data, seed)?;
     if seq.imu.is_empty() && exp.fit.imu.iter().any(|m| *m != ImuMode::None) {
         bail!(
@@ -826,6 +961,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         norm: &norm,
         cfg: &exp.fit,
         known_targets: known_poses.iter().map(|p| norm.to_field_frame(p)).collect(),
+        known_truth: &known_poses,
         held_times: &held_times,
         held_truth: &held_truth,
     };
@@ -855,12 +991,13 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             "rot_err_deg",
             "trans_err_m",
             "ang_vel_rmse_rad_s",
-            "final_loss",
+            "known_rot_err_deg",
+            "fit_steps",
         ])
         .report_every(100)
         .run(|unit| {
             let (mode_key, name) = (unit.key().condition.clone(), unit.key().method.clone());
-            let (all, num_params, final_loss, ang_vel_rmse_rad_s) = if name == INTERP {
+            let (all, num_params, fitted, ang_vel_rmse_rad_s) = if name == INTERP {
                 let all: Vec<Isometry3<f64>> =
                     seq.times.iter().map(|&t| interpolate(&seq, t).0).collect();
                 let ang_vel = rms(seq
@@ -875,7 +1012,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     .context("an IMU mode of the config")?;
                 let section = config.section(&format!("fields.{name}"));
                 let mut field = build_pose_field(&section, &ctx)?;
-                let final_loss = fit
+                let fitted = fit
                     .run(field.as_mut(), mode, iterations, seed, unit)
                     .with_context(|| format!("fitting [fields.{name}] with imu = {mode_key:?}"))?;
                 let mut out = PoseBatch::default();
@@ -893,7 +1030,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         .enumerate()
                         .map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
                 };
-                (all, Some(field.num_params()), Some(final_loss), ang_vel)
+                (all, Some(field.num_params()), Some(fitted), ang_vel)
             };
             let estimated: Vec<Isometry3<f64>> = held_out.iter().map(|&i| all[i]).collect();
             let (rot_err_deg, rot_rmse_deg, trans_err_m, trans_rmse_m) =
@@ -915,7 +1052,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 ang_vel_rmse_rad_s,
                 held_out_poses: held_out.len(),
                 num_params,
-                final_loss,
+                final_loss: fitted.as_ref().map(|f| f.0),
+                fit: fitted.map(|f| f.1),
             })
         })?;
     Ok(())

@@ -101,6 +101,7 @@ fn nerf_step(c: &mut Criterion) {
                 rotation: decay([2e-4, 1e-6]),
                 translation: decay([1e-3, 1e-5]),
                 pose: decay([1e-3, 1e-5]),
+                hold: 0,
                 warmup: 600,
                 rotation_warmup: 600,
             },

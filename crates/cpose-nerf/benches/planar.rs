@@ -42,6 +42,7 @@ fn planar_step(c: &mut Criterion) {
         iterations: 2000,
         pixels_per_step: 4096,
         lr_field: 1e-3,
+        pose_hold: 0,
     };
     let range: TimeRange = spec.time_range();
     let times = spec.patch_times();

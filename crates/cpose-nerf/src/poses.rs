@@ -31,22 +31,80 @@ pub struct PoseSchedules {
     pub translation: ExponentialDecay,
     /// Parameters that move both (per-frame se(3), spline control poses).
     pub pose: ExponentialDecay,
-    /// Steps over which every rate ramps up linearly from 0 (0: none). While the field is
-    /// still blank its pose gradients are noise, which moves even true poses by degrees.
+    /// Steps during which the poses are held: not moved, their gradients not even computed,
+    /// while the field learns to explain the images from the initial poses. A field that is
+    /// still blank or blurred gives pose gradients that move even true poses by degrees.
+    pub hold: u64,
+    /// Steps after the hold over which every rate ramps up linearly from 0 (0: none).
     pub warmup: u64,
-    /// Steps over which the rotation rates ramp up instead (PoseNet's rotation network; per-frame
-    /// and spline parameters, which move both, follow `warmup`).
+    /// Steps after the hold over which the rotation rates ramp up instead (PoseNet's rotation
+    /// network; per-frame and spline parameters, which move both, follow `warmup`).
     pub rotation_warmup: u64,
 }
 
 impl PoseSchedules {
-    /// The learning rate of `kind`'s parameters at iteration `it`, warm-up included.
+    /// Whether the poses are held at iteration `it`.
+    pub fn is_held(&self, it: u64) -> bool {
+        it < self.hold
+    }
+
+    /// The learning rate of `kind`'s parameters at iteration `it`: 0 during the hold, then the
+    /// warm-up ramp on the decaying rate.
     pub fn lr(&self, kind: ParamKind, it: u64) -> f64 {
+        let Some(after) = it.checked_sub(self.hold) else {
+            return 0.0;
+        };
         match kind {
-            ParamKind::Rotation => ramp(it, self.rotation_warmup) * self.rotation.lr(it),
-            ParamKind::Translation => ramp(it, self.warmup) * self.translation.lr(it),
-            ParamKind::Pose => ramp(it, self.warmup) * self.pose.lr(it),
+            ParamKind::Rotation => ramp(after, self.rotation_warmup) * self.rotation.lr(it),
+            ParamKind::Translation => ramp(after, self.warmup) * self.translation.lr(it),
+            ParamKind::Pose => ramp(after, self.warmup) * self.pose.lr(it),
         }
+    }
+}
+
+/// A task's pose hold and warm-ups, as fractions of its steps (the `[train]` keys
+/// `pose_hold`, `pose_warmup` and `rotation_warmup`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseTiming {
+    /// The hold ([`PoseSchedules::hold`]).
+    pub hold: f64,
+    /// The warm-up after it ([`PoseSchedules::warmup`]).
+    pub warmup: f64,
+    /// The rotation's warm-up after it ([`PoseSchedules::rotation_warmup`]).
+    pub rotation_warmup: f64,
+}
+
+impl PoseTiming {
+    /// `(hold, warmup, rotation_warmup)` in steps of a run of `iterations`. Errors name the
+    /// `[train]` key that is not a fraction, or a hold that leaves the poses no steps once its
+    /// warm-ups are done.
+    pub fn steps(&self, iterations: usize) -> anyhow::Result<(u64, u64, u64)> {
+        for (key, value) in [
+            ("pose_hold", self.hold),
+            ("pose_warmup", self.warmup),
+            ("rotation_warmup", self.rotation_warmup),
+        ] {
+            if !(0.0..=1.0).contains(&value) {
+                anyhow::bail!(
+                    "[train] {key} = {value} must lie in [0, 1] (a fraction of the steps)"
+                );
+            }
+        }
+        let longest = self.warmup.max(self.rotation_warmup);
+        if self.hold >= 1.0 || self.hold + longest > 1.0 {
+            anyhow::bail!(
+                "[train] pose_hold = {} with a warm-up of {longest} is longer than the schedule: \
+                 the poses would not reach their full rate in {iterations} steps; hold + warm-up \
+                 must be at most 1",
+                self.hold
+            );
+        }
+        let steps = |fraction: f64| (fraction * iterations as f64).round() as u64;
+        Ok((
+            steps(self.hold),
+            steps(self.warmup),
+            steps(self.rotation_warmup),
+        ))
     }
 }
 
@@ -95,9 +153,15 @@ impl FramePoses {
         }
     }
 
-    /// Whether the poses are optimised.
+    /// Whether the poses are optimised at all.
     pub fn is_trainable(&self) -> bool {
         self.correction.is_some()
+    }
+
+    /// Whether the poses are optimised at iteration `it`: trainable and not held
+    /// ([`PoseSchedules::hold`]).
+    pub fn is_trained_at(&self, it: u64) -> bool {
+        self.is_trainable() && !self.schedules.is_held(it)
     }
 
     /// Replaces the frames — their initial poses and times — keeping the correction and its
@@ -142,7 +206,8 @@ impl FramePoses {
     }
 
     /// One optimiser step at iteration `it` from `∂L/∂q` (raw, w first) and `∂L/∂t` of every
-    /// frame's `world_from_cam` as returned by the last [`FramePoses::update`].
+    /// frame's `world_from_cam` as returned by the last [`FramePoses::update`]; nothing while
+    /// the poses are held.
     pub fn step(
         &mut self,
         grads: &[(Quaternion<f64>, Vector3<f64>)],
@@ -151,6 +216,9 @@ impl FramePoses {
         let Some(c) = self.correction.as_mut() else {
             return Ok(());
         };
+        if self.schedules.is_held(it) {
+            return Ok(());
+        }
         let n = self.times.len();
         assert_eq!(grads.len(), n, "one pose gradient per frame");
         self.cotangent.reset(n, Order::Pose);
@@ -249,6 +317,7 @@ mod tests {
             rotation: decay,
             translation: decay,
             pose: decay,
+            hold: 0,
             warmup: 4,
             rotation_warmup: 8,
         };
@@ -260,6 +329,58 @@ mod tests {
         assert!((rate(ParamKind::Rotation, 1) - 0.25).abs() < 1e-12);
         assert!((rate(ParamKind::Rotation, 7) - 1.0).abs() < 1e-12);
         assert_eq!(ramp(0, 0), 1.0);
+    }
+
+    #[test]
+    fn timings_in_steps_and_holds_longer_than_the_schedule_are_errors() {
+        let timing = PoseTiming {
+            hold: 0.1,
+            warmup: 0.05,
+            rotation_warmup: 0.2,
+        };
+        assert_eq!(timing.steps(1000).unwrap(), (100, 50, 200));
+        let long = PoseTiming {
+            hold: 0.9,
+            ..timing
+        };
+        let e = long.steps(1000).unwrap_err().to_string();
+        assert!(
+            e.contains("pose_hold = 0.9") && e.contains("longer than the schedule"),
+            "{e}"
+        );
+        let bad = PoseTiming {
+            warmup: f64::NAN,
+            ..timing
+        };
+        assert!(
+            bad.steps(1000)
+                .unwrap_err()
+                .to_string()
+                .contains("pose_warmup")
+        );
+    }
+
+    #[test]
+    fn a_hold_keeps_the_rates_at_zero_then_the_warm_up_starts() {
+        let decay = ExponentialDecay {
+            lr0: 1e-3,
+            lr_end: 1e-5,
+            max_iter: 100,
+        };
+        let s = PoseSchedules {
+            rotation: decay,
+            translation: decay,
+            pose: decay,
+            hold: 10,
+            warmup: 4,
+            rotation_warmup: 4,
+        };
+        assert!(s.is_held(9) && !s.is_held(10));
+        for kind in [ParamKind::Rotation, ParamKind::Translation, ParamKind::Pose] {
+            assert_eq!(s.lr(kind, 9), 0.0);
+            assert!((s.lr(kind, 10) / decay.lr(10) - 0.25).abs() < 1e-12);
+            assert!((s.lr(kind, 13) / decay.lr(13) - 1.0).abs() < 1e-12);
+        }
     }
 
     /// The loss of `(q_c, t_c) ∘ init` with the composition written on raw quaternions,

@@ -5,6 +5,7 @@ use nalgebra::{DMatrix, Isometry3, Matrix3, Rotation3, Translation3, UnitQuatern
 use serde::Serialize;
 
 use super::EvalError;
+use crate::geometry::rotation_angle_between;
 
 /// A similarity transform `x ↦ s·R·x + t` (Sim(3); SE(3) when `scale == 1`), mapping the frame of
 /// an estimate into the frame of a reference.
@@ -268,14 +269,6 @@ pub fn procrustes_barf(
     })
 }
 
-/// BARF's `camera.rotation_distance(R1, R2)`: `arccos(clamp((tr(R1 R2ᵀ) − 1)/2, −1 + 1e-7,
-/// 1 − 1e-7))`, radians. The clamp makes identical rotations read ≈ 2.6e-5°, not 0, as in BARF.
-pub fn rotation_distance_barf(r1: &Matrix3<f64>, r2: &Matrix3<f64>) -> f64 {
-    const EPS: f64 = 1e-7;
-    let cos = ((r1 * r2.transpose()).trace() - 1.0) / 2.0;
-    cos.clamp(-1.0 + EPS, 1.0 - EPS).acos()
-}
-
 /// BARF's pose errors after Procrustes alignment (`evaluate_camera_alignment`), means over frames.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BarfPoseErrors {
@@ -302,7 +295,7 @@ pub struct BarfPoseErrors {
 /// `evaluate_camera_alignment`): Procrustes on the camera centres (translations of
 /// `world_from_cam`, reflections fixed by `fix`), the predicted poses mapped into the GT frame,
 /// then per frame
-/// `e_R = rotation_distance_barf(R_al, R_gt)` in degrees and `e_t = ‖t_al − t_gt‖` between the
+/// `e_R = |Log(R_gtᵀ R_al)|` in degrees and `e_t = ‖t_al − t_gt‖` between the
 /// **world-to-camera** translations `t = −R_w2c·c`; both averaged over frames.
 pub fn barf_pose_errors(
     gt_world_from_cam: &[Isometry3<f64>],
@@ -324,11 +317,11 @@ pub fn barf_pose_errors(
     let mut pairs = Vec::with_capacity(gt_centres.len());
     for (gt, pred) in gt_world_from_cam.iter().zip(pred_world_from_cam) {
         let aligned = alignment.align_pose(pred);
-        let r_al = aligned.rotation.to_rotation_matrix().into_inner();
-        let r_gt = gt.rotation.to_rotation_matrix().into_inner();
-        // tr(A Bᵀ) is the same for world-to-camera and camera-to-world rotations.
-        rot.push(rotation_distance_barf(&r_al, &r_gt).to_degrees());
-        pairs.push((r_gt, r_al));
+        // The angle of R_gtᵀ R_al, the same for world-to-camera and camera-to-world rotations.
+        // BARF computes it as arccos((tr − 1)/2) clamped at 1 − 1e-7, which reads 0.026° for
+        // identical rotations; the quaternion's atan2 form is exact down to zero.
+        rot.push(rotation_angle_between(&gt.rotation, &aligned.rotation).to_degrees());
+        pairs.push((gt.rotation, aligned.rotation));
         let t_al = aligned.inverse().translation.vector;
         let t_gt = gt.inverse().translation.vector;
         trans.push((t_al - t_gt).norm());
@@ -337,7 +330,7 @@ pub fn barf_pose_errors(
     let common = common_rotation(&pairs)?;
     let relative = pairs
         .iter()
-        .map(|(r_gt, r_al)| rotation_distance_barf(&(common * r_al), r_gt).to_degrees())
+        .map(|(r_gt, r_al)| rotation_angle_between(r_gt, &(common * r_al)).to_degrees())
         .sum::<f64>()
         / n;
     Ok(BarfPoseErrors {
@@ -353,14 +346,16 @@ pub fn barf_pose_errors(
 /// The rotation `C` that best turns the aligned orientations onto the true ones,
 /// `argmax_C Σ_i tr(C R_al,i R_gt,iᵀ)` over the pairs `(R_gt,i, R_al,i)`: the projection of
 /// `Σ_i R_gt,i R_al,iᵀ` onto SO(3) (its polar factor, `U diag(1, 1, det(U Vᵀ)) Vᵀ`).
-fn common_rotation(pairs: &[(Matrix3<f64>, Matrix3<f64>)]) -> Result<Matrix3<f64>, EvalError> {
+fn common_rotation(
+    pairs: &[(UnitQuaternion<f64>, UnitQuaternion<f64>)],
+) -> Result<UnitQuaternion<f64>, EvalError> {
     let m: Matrix3<f64> = pairs
         .iter()
-        .map(|(r_gt, r_al)| r_gt * r_al.transpose())
+        .map(|(r_gt, r_al)| (r_gt * r_al.inverse()).to_rotation_matrix().into_inner())
         .sum();
     let Svd3 { u, v_t, .. } = svd3(&m)?;
     let flip = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (u * v_t).determinant().signum()));
-    Ok(u * flip * v_t)
+    Ok(UnitQuaternion::from_matrix(&(u * flip * v_t)))
 }
 
 #[cfg(test)]
@@ -479,13 +474,9 @@ mod tests {
         let s = known_sim3(0.3);
         let pred: Vec<_> = gt.iter().map(|p| s.transform_pose(p)).collect();
         let errors = barf_pose_errors(&gt, &pred, ReflectionFix::BarfThirdRow).unwrap();
-        // BARF's clamp at 1 − 1e-7 leaves acos(1 − 1e-7) ≈ 4.47e-4 rad ≈ 0.0256° as the floor.
-        let floor = (1.0_f64 - 1e-7).acos().to_degrees();
-        assert!(
-            (errors.rot_err_deg - floor).abs() < 1e-6,
-            "{}",
-            errors.rot_err_deg
-        );
+        // No floor: BARF's clamped arccos would read 0.0256° here.
+        assert!(errors.rot_err_deg < 1e-9, "{}", errors.rot_err_deg);
+        assert!(errors.rot_err_relative_deg < 1e-9);
         assert!(errors.trans_err < 1e-12, "{}", errors.trans_err);
         assert!((errors.alignment.s0 / errors.alignment.s1 - 1.0 / 0.3).abs() < 1e-12);
         // Round trip through the learned frame (§2.5).
@@ -499,7 +490,7 @@ mod tests {
     #[test]
     fn barf_errors_of_one_rotated_camera() {
         // Same centres (so the Procrustes similarity is the identity), camera 3 turned by 10°
-        // about its own z axis. By hand: e_R = 10° for camera 3, the clamp floor elsewhere;
+        // about its own z axis. By hand: e_R = 10° for camera 3, 0 elsewhere;
         // e_t = ‖R_w2c,al·c − R_w2c,gt·c‖ = ‖(Rz(10°)ᵀ − I)·R_gtᵀ·c‖ = 2·sin(5°)·‖c_xy in cam‖.
         let mut rng = ChaCha8Rng::seed_from_u64(6);
         let gt = random_poses(&mut rng, 8);
@@ -508,7 +499,6 @@ mod tests {
         pred[3].rotation *= turn;
         let errors = barf_pose_errors(&gt, &pred, ReflectionFix::BarfThirdRow).unwrap();
         assert!((errors.alignment.rotation - Matrix3::identity()).norm() < 1e-12);
-        let floor = (1.0_f64 - 1e-7).acos().to_degrees();
         let c_in_cam = gt[3].rotation.inverse() * gt[3].translation.vector;
         let expected_t = 2.0 * 5f64.to_radians().sin() * c_in_cam.xy().norm();
         for k in 0..8 {
@@ -520,10 +510,10 @@ mod tests {
                 assert!((r - 10.0).abs() < 1e-9, "{r}");
                 assert!((t - expected_t).abs() < 1e-12, "{t} vs {expected_t}");
             } else {
-                assert!((r - floor).abs() < 1e-6 && t < 1e-12, "{k}: {r} {t}");
+                assert!(r < 1e-9 && t < 1e-12, "{k}: {r} {t}");
             }
         }
-        assert!((errors.rot_err_deg - (10.0 + 7.0 * floor) / 8.0).abs() < 1e-6);
+        assert!((errors.rot_err_deg - 10.0 / 8.0).abs() < 1e-9);
         assert!((errors.trans_err - expected_t / 8.0).abs() < 1e-12);
     }
 
@@ -628,13 +618,5 @@ mod tests {
         };
         assert!(residual(&kabsch) < 0.021, "{}", residual(&kabsch));
         assert!(residual(&barf) > 0.1, "{}", residual(&barf));
-    }
-
-    #[test]
-    fn rotation_distance_clamps_like_barf() {
-        let i = Matrix3::identity();
-        assert!((rotation_distance_barf(&i, &i) - (1.0_f64 - 1e-7).acos()).abs() < 1e-15);
-        let r = Rotation3::from_scaled_axis(Vector3::new(0.0, 0.0, 0.5)).into_inner();
-        assert!((rotation_distance_barf(&r, &i) - 0.5).abs() < 1e-12);
     }
 }

@@ -33,8 +33,7 @@ use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
 pub use align::{
-    BarfPoseErrors, BarfSim3, ReflectionFix, Sim3, barf_pose_errors, procrustes_barf,
-    rotation_distance_barf, umeyama,
+    BarfPoseErrors, BarfSim3, ReflectionFix, Sim3, barf_pose_errors, procrustes_barf, umeyama,
 };
 pub use associate::{Association, DEFAULT_MAX_DIFF_SECS, associate, associate_with_offset};
 pub use metrics::{

@@ -1,6 +1,6 @@
 //! A small neural-network kit with exact input derivatives: activations, an MLP with tangent
 //! streams and a hand-written reverse pass (matrix products through faer), input encodings,
-//! BARF's coarse-to-fine weights, seeded initialisation and Adam.
+//! BARF's coarse-to-fine weights, seeded initialisation, Adam and a stopping rule for fits.
 //!
 //! Scalars are generic over [`Real`](crate::Real): `f32` for training, `f64` for gradient checks.
 //! Buffers live in workspaces that grow with the batch and are reused, so a training loop does
@@ -9,12 +9,14 @@
 mod activation;
 mod adam;
 mod coarse_to_fine;
+mod convergence;
 mod embedding;
 mod mlp;
 
 pub use activation::Activation;
 pub use adam::{Adam, ExponentialDecay};
 pub use coarse_to_fine::coarse_to_fine_weights;
+pub use convergence::{Convergence, StopReason, StopRule};
 pub use embedding::{Embedding, Encoding};
 pub use faer::Accum;
 pub use mlp::{Init, Mlp, MlpSpec, MlpWorkspace};

@@ -5,6 +5,7 @@
 use serde::Deserialize;
 use serde::de::IgnoredAny;
 
+use super::posenet::bands_for_spacing;
 use super::{
     Composed, DiscretePosesConfig, PoseField, PoseFieldError, PoseNetConfig, SplineConfig,
     SplineKind,
@@ -19,6 +20,16 @@ fn located<'s>(section: &'s Section<'_>) -> impl Fn(PoseFieldError) -> ConfigErr
 
 fn posenet(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField>, ConfigError> {
     let mut config: PoseNetConfig = section.decode_params()?;
+    // Without `bands`, the rule of the sample spacing (PoseNet's docs, "Choosing the bands").
+    #[derive(Deserialize)]
+    struct Bands {
+        bands: Option<IgnoredAny>,
+    }
+    if section.decode::<Bands>()?.bands.is_none()
+        && let Some(spacing) = median_spacing(&ctx.frame_times_secs)
+    {
+        config.bands = bands_for_spacing(ctx.time_range, spacing, config.time_span);
+    }
     // The table's `seed` offsets the run's seed, so `[run] seed` varies every field of a run.
     config.seed = config.seed.wrapping_add(ctx.seed);
     Ok(Box::new(
@@ -26,6 +37,22 @@ fn posenet(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseFiel
             .init::<f32>(ctx.time_range)
             .map_err(located(section))?,
     ))
+}
+
+/// The median interval between consecutive sorted times; none for fewer than two distinct times.
+fn median_spacing(times: &[f64]) -> Option<f64> {
+    let mut sorted = times.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let mut gaps: Vec<f64> = sorted
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|g| *g > 0.0)
+        .collect();
+    if gaps.is_empty() {
+        return None;
+    }
+    gaps.sort_by(f64::total_cmp);
+    Some(gaps[gaps.len() / 2])
 }
 
 fn discrete(section: &Section<'_>, ctx: &FieldContext) -> Result<Box<dyn PoseField>, ConfigError> {
@@ -168,6 +195,31 @@ skip_layer = 0
         for name in ["composed", "discrete", "lie_spline", "posenet", "spline"] {
             assert!(names.contains(&name), "{name} is not registered: {names:?}");
         }
+    }
+
+    /// Without `bands`, a PoseNet table takes them from the spacing of the times it is fitted
+    /// to: 10 s sampled every 0.2 s gives `⌊1 + log2(10 / 0.8)⌋ = 4`; given, they stay.
+    #[test]
+    fn posenet_bands_default_to_the_rule_of_the_sample_spacing() {
+        let ctx = FieldContext {
+            time_range: TimeRange::new(0.0, 10.0).unwrap(),
+            frame_times_secs: (0..=50).map(|k| 0.2 * k as f64).collect(),
+            seed: 0,
+        };
+        let params = |table: &str| {
+            let config = Config::from_text("test.toml", format!("task = \"none\"\n[p]\n{table}"));
+            build_pose_field(&config.section("p"), &ctx)
+                .unwrap()
+                .num_params()
+        };
+        let small = "kind = \"posenet\"\nwidth = 8\ndepth = 2\nskip_layer = 0\n";
+        assert_eq!(params(small), params(&format!("{small}bands = 4")));
+        assert_ne!(params(small), params(&format!("{small}bands = 5")));
+        assert_eq!(
+            super::bands_for_spacing(ctx.time_range, 0.2, 0.5),
+            5,
+            "w = 0.5 halves every frequency"
+        );
     }
 
     #[test]

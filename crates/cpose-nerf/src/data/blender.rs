@@ -141,6 +141,45 @@ pub fn load_blender(
     })
 }
 
+/// The frame numbers of a Blender split that is one recording in time: the number each image
+/// file's stem ends in (`r_17.png` → 17), which must rise strictly in file order. Errors name
+/// `json_path` and the frame whose name has no number, repeats one or comes out of order.
+pub fn sequence_numbers(names: &[String], json_path: &Path) -> Result<Vec<u64>, DataError> {
+    let bad = |expected: &str, found: String| DataError::Format {
+        path: json_path.to_owned(),
+        expected: expected.to_owned(),
+        found,
+    };
+    let mut numbers: Vec<u64> = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let stem = name
+            .rsplit_once('.')
+            .map_or(name.as_str(), |(stem, _)| stem);
+        let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+        let number = stem[stem.len() - digits..].parse::<u64>().map_err(|_| {
+            bad(
+                "frames of a time sequence: image names ending in their frame number (r_<k>.png)",
+                format!("frame {i}: {name}"),
+            )
+        })?;
+        if let Some(&previous) = numbers.last()
+            && number <= previous
+        {
+            let what = if number == previous {
+                "repeats"
+            } else {
+                "comes after"
+            };
+            return Err(bad(
+                "frames of a time sequence, in rising order of their numbers",
+                format!("frame {i}: {name} {what} frame {}: {}", i - 1, names[i - 1]),
+            ));
+        }
+        numbers.push(number);
+    }
+    Ok(numbers)
+}
+
 /// A 4×4 matrix of finite numbers (rows) whose last row is `0 0 0 1`.
 fn matrix4(value: Option<&Value>) -> Option<[[f64; 4]; 4]> {
     let rows = value?.as_array()?;
@@ -208,6 +247,59 @@ mod tests {
             ..options
         };
         assert_eq!(load_blender(&scene, &few).unwrap().len(), 3);
+    }
+
+    #[test]
+    fn sequences_are_numbered_by_their_file_names_and_must_rise() {
+        let json = Path::new("lego/transforms_test.json");
+        let names = |list: &[&str]| list.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+        assert_eq!(
+            sequence_numbers(&names(&["r_0.png", "r_2.png", "r_10.png"]), json).unwrap(),
+            [0, 2, 10]
+        );
+        for (list, found) in [
+            (
+                &["r_0.png", "r_2.png", "r_1.png"][..],
+                "r_1.png comes after frame 1: r_2.png",
+            ),
+            (&["r_0.png", "r_1.png", "r_1.png"][..], "r_1.png repeats"),
+            (&["r_0.png", "cover.png"][..], "frame 1: cover.png"),
+        ] {
+            let e = sequence_numbers(&names(list), json)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("transforms_test.json") && e.contains(found),
+                "{e}"
+            );
+        }
+    }
+
+    /// The whole Lego scene's test split: 200 views of one revolution, 3.6° apart.
+    #[test]
+    fn the_lego_test_split_is_one_orbit_in_file_order() {
+        let Some(data_dir) = cpose_core::fs::shared_data_dir() else {
+            println!("skipped: shared data folder ../shared/data not found");
+            return;
+        };
+        let scene = data_dir.join("nerf_synthetic/lego");
+        let options = BlenderOptions {
+            split: "test".to_owned(),
+            max_frames: Some(11),
+            ..BlenderOptions::default()
+        };
+        let data = load_blender(&scene, &options).unwrap();
+        let numbers = sequence_numbers(&data.names, &scene.join("transforms_test.json")).unwrap();
+        assert_eq!(numbers, (0..11).collect::<Vec<u64>>());
+        assert_eq!((data.camera.width, data.camera.height), (400, 400));
+        let azimuth = |k: usize| {
+            let c = data.world_from_camera[k].translation.vector;
+            c.y.atan2(c.x).to_degrees()
+        };
+        for k in 1..11 {
+            let step = (azimuth(k) - azimuth(k - 1) + 540.0).rem_euclid(360.0) - 180.0;
+            assert!((step.abs() - 3.6).abs() < 0.05, "view {k}: {step}°");
+        }
     }
 
     #[test]

@@ -8,11 +8,12 @@
 //! `true_poses` trains with the ground truth (the reference for PSNR) and `fixed` with the
 //! initial poses. Everything else is shared: field, sampling, rays and seeds.
 //!
-//! One departure from the paper: the pose learning rates ramp up linearly over the first
-//! `[train] pose_warmup` of the steps (default 10%). Before the field has learnt anything its
-//! pose gradients are noise, and poses moved at full rate move away from the truth (measured in
-//! `docs/results/nerf.md`). `[train] rotation_warmup` gives PoseNet's rotation network a ramp of
-//! its own.
+//! One departure from the paper: the poses are held for the first `[train] pose_hold` of the
+//! steps, then their learning rates ramp up linearly over `[train] pose_warmup` of them
+//! ([`PoseSchedules`]). Before the field can explain the images its pose gradients are noise,
+//! and poses moved at full rate against a blank or blurred field move away from the truth, even
+//! from the true poses (measured in `docs/results/nerf.md`). `[train] rotation_warmup` gives
+//! PoseNet's rotation network a ramp of its own.
 //!
 //! An option beyond the paper for large noise: `[train] field_restart_every = K` restarts the
 //! field every `K` steps up to `field_restart_until` (a fraction of the steps) while the poses
@@ -50,6 +51,7 @@
 
 pub mod eval;
 pub mod train;
+mod views;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -61,23 +63,21 @@ use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{FieldContext, PoseField, PoseNetConfig, TimeRange};
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::camera::PinholeCamera;
-use crate::data::{Dataset, blender, llff};
-use crate::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
-use crate::image::Image;
+use crate::field3d::{RadianceField, RadianceFieldConfig};
 use crate::metrics::ssim;
-use crate::poses::{FramePoses, PoseSchedules};
-use crate::render::{
-    Clip, LastInterval, RenderSettings, Renderer, Sampling, depth_image, render_view,
-};
-use crate::scene::{MonocularOrbit, PoseNoise, SyntheticScene};
+use crate::poses::{FramePoses, PoseSchedules, PoseTiming};
+use crate::render::{Renderer, Sampling, depth_image, render_view};
+
+use crate::scene::{MonocularOrbit, PoseNoise};
 use eval::Refinement;
 use train::{Schedule, Trainer};
+use views::{DataConfig, RenderConfig, Source, Views};
 
 inventory::submit! {
     Task {
@@ -110,88 +110,6 @@ struct Experiment {
     /// PoseNet's settings ([`PoseNetConfig`]).
     #[serde(rename = "posenet")]
     _posenet: Option<serde::de::IgnoredAny>,
-}
-
-/// Where the images come from.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-enum Source {
-    /// The built-in scene along the monocular orbit.
-    #[default]
-    Synthetic,
-    /// An LLFF forward-facing scene.
-    Llff,
-    /// A NeRF-synthetic (Blender) scene.
-    Blender,
-}
-
-/// `[data]`.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-struct DataConfig {
-    source: Source,
-    /// Scene folder (llff, blender).
-    path: Option<PathBuf>,
-    /// LLFF downscale factor (`images_N`).
-    factor: u32,
-    /// Keep every k-th training frame (a faster camera).
-    subsample: usize,
-    /// Blender: at most this many frames.
-    max_frames: Option<usize>,
-    /// Synthetic: image size and horizontal field of view.
-    width: usize,
-    height: usize,
-    fov_x_deg: f64,
-    /// Synthetic: sub-pixel rays per side.
-    supersample: usize,
-    /// Synthetic and Blender: held-out views.
-    test_views: usize,
-}
-
-impl Default for DataConfig {
-    fn default() -> Self {
-        Self {
-            source: Source::Synthetic,
-            path: None,
-            factor: 8,
-            subsample: 1,
-            max_frames: None,
-            width: 100,
-            height: 100,
-            fov_x_deg: 40.0,
-            supersample: 2,
-            test_views: 10,
-        }
-    }
-}
-
-/// `[render]`.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-struct RenderConfig {
-    samples: usize,
-    /// Depth range; synthetic default `[2, 6]` (orbit radius 4), LLFF `[1, inf]` in disparity.
-    near: Option<f64>,
-    far: Option<f64>,
-    /// `"metric"` or `"inverse"` (LLFF default).
-    sampling: Option<String>,
-    /// Background colour (white for object scenes; none for LLFF).
-    background: Option<[f32; 3]>,
-    /// Bounded scenes: sample only the chord through the bounding sphere, empty outside.
-    clip: bool,
-}
-
-impl Default for RenderConfig {
-    fn default() -> Self {
-        Self {
-            samples: 64,
-            near: None,
-            far: None,
-            sampling: None,
-            background: None,
-            clip: true,
-        }
-    }
 }
 
 /// A pose model, named as in `metrics.json`.
@@ -231,9 +149,11 @@ struct TrainConfig {
     posenet_lr_rotation: [f64; 2],
     /// BARF and spline: `[start, end]` for their se(3) parameters.
     lr_pose: [f64; 2],
-    /// Fraction of the steps over which the pose learning rates ramp up linearly from 0 (not in
-    /// the paper: while the field is blank its pose gradients are noise; see
-    /// [`PoseSchedules::warmup`]).
+    /// Fraction of the steps during which the poses are held while the field fits the initial
+    /// poses (not in the paper; [`PoseSchedules::hold`]).
+    pose_hold: f64,
+    /// Fraction of the steps after the hold over which the pose learning rates ramp up
+    /// linearly from 0 ([`PoseSchedules::warmup`]).
     pose_warmup: f64,
     /// The same for PoseNet's rotation network alone (default: `pose_warmup`).
     rotation_warmup: Option<f64>,
@@ -259,6 +179,7 @@ impl Default for TrainConfig {
             posenet_lr_translation: [1e-3, 1e-5],
             posenet_lr_rotation: [2e-4, 1e-6],
             lr_pose: [1e-3, 1e-5],
+            pose_hold: 0.0,
             pose_warmup: 0.1,
             rotation_warmup: None,
             field_restart_every: 0,
@@ -289,267 +210,6 @@ impl Default for EvalConfig {
     }
 }
 
-/// Training and test views with their true poses, and how to render the scene.
-struct Views {
-    /// What the data is called in `metrics.json`.
-    condition: String,
-    camera: PinholeCamera,
-    train_images: Vec<Image>,
-    train_times: Vec<f64>,
-    train_truth: Vec<Isometry3<f64>>,
-    test_images: Vec<Image>,
-    test_truth: Vec<Isometry3<f64>>,
-    settings: RenderSettings,
-    bounds: SceneBounds,
-    /// Size of the camera path (the orbit diameter; the spread of LLFF cameras), for noise.
-    diameter: f64,
-}
-
-fn resolve_settings(
-    render: &RenderConfig,
-    default: (Sampling, Option<[f32; 3]>),
-    bounds: &SceneBounds,
-) -> anyhow::Result<RenderSettings> {
-    let (default_sampling, default_bg) = default;
-    let (dn, df) = match default_sampling {
-        Sampling::Metric { near, far } | Sampling::InverseDepth { near, far } => (near, far),
-    };
-    let (near, far) = (render.near.unwrap_or(dn), render.far.unwrap_or(df));
-    if !(near > 0.0 && far > near) {
-        bail!("[render]: need 0 < near < far, got near = {near}, far = {far}");
-    }
-    let sampling = match render.sampling.as_deref() {
-        None => match default_sampling {
-            Sampling::Metric { .. } => Sampling::Metric { near, far },
-            Sampling::InverseDepth { .. } => Sampling::InverseDepth { near, far },
-        },
-        Some("metric") if far.is_finite() => Sampling::Metric { near, far },
-        Some("inverse") => Sampling::InverseDepth { near, far },
-        Some(other) => bail!(
-            "[render] sampling: expected \"metric\" (finite far) or \"inverse\", got {other:?}"
-        ),
-    };
-    if render.samples == 0 {
-        bail!("[render] samples: expected at least 1");
-    }
-    Ok(RenderSettings {
-        last_interval: LastInterval::Closed,
-        samples: render.samples,
-        sampling,
-        background: render.background.or(default_bg),
-        clip: (render.clip && !bounds.unbounded).then_some(Clip {
-            centre: bounds.centre,
-            radius: bounds.radius,
-        }),
-    })
-}
-
-fn subsample<T: Clone>(items: &[T], every: usize) -> Vec<T> {
-    items.iter().step_by(every.max(1)).cloned().collect()
-}
-
-fn synthetic_views(exp: &Experiment) -> anyhow::Result<Views> {
-    let d = &exp.data;
-    if d.width == 0 || d.height == 0 || !(d.fov_x_deg > 0.0 && d.fov_x_deg < 180.0) {
-        bail!("[data]: need width, height ≥ 1 and 0 < fov_x_deg < 180");
-    }
-    exp.orbit.validate()?;
-    let camera = PinholeCamera::from_fov_x(d.width, d.height, d.fov_x_deg.to_radians());
-    let scene = SyntheticScene::object_centric();
-    let times = exp.orbit.frame_times();
-    let frames = subsample(&times, d.subsample);
-    let render = |t: &f64| {
-        let pose = exp.orbit.world_from_camera(*t);
-        (
-            scene.render(&camera, &pose, d.supersample.max(1)).image,
-            pose,
-        )
-    };
-    let (train_images, train_truth): (Vec<_>, Vec<_>) = frames.iter().map(render).unzip();
-    // Held-out views half-way between training frames of the full sequence.
-    let n = times.len();
-    let test_times: Vec<f64> = (0..d.test_views)
-        .map(|k| times[((2 * k + 1) * (n - 1)) / (2 * d.test_views.max(1))] + 0.5)
-        .collect();
-    let (test_images, test_truth) = test_times.iter().map(render).unzip();
-    let bounds = SceneBounds {
-        centre: [0.0; 3],
-        radius: scene.bounding_radius(),
-        unbounded: false,
-    };
-    let settings = resolve_settings(
-        &exp.render,
-        (
-            Sampling::Metric {
-                near: 2.0,
-                far: 6.0,
-            },
-            Some([1.0; 3]),
-        ),
-        &bounds,
-    )?;
-    Ok(Views {
-        condition: "synthetic".to_owned(),
-        camera,
-        train_images,
-        train_times: frames,
-        train_truth,
-        test_images,
-        test_truth,
-        settings,
-        bounds,
-        diameter: exp.orbit.diameter(),
-    })
-}
-
-/// BARF's LLFF normalisation: scale so that the smallest near bound becomes `1/0.75`, then
-/// express every pose relative to the mean camera (mean centre; rotation from the mean
-/// viewing and up axes, orthonormalised).
-fn normalise_llff(dataset: &mut Dataset) -> anyhow::Result<()> {
-    let Some(bounds) = &dataset.bounds else {
-        bail!("LLFF data without depth bounds");
-    };
-    let near = bounds.iter().map(|b| b[0]).fold(f64::INFINITY, f64::min);
-    if !(near > 0.0 && near.is_finite()) {
-        bail!("LLFF near bounds must be positive, got {near}");
-    }
-    let scale = 1.0 / (0.75 * near);
-    let n = dataset.len() as f64;
-    let mut centre = Vector3::zeros();
-    let (mut z, mut y) = (Vector3::zeros(), Vector3::zeros());
-    for p in &mut dataset.world_from_camera {
-        p.translation.vector *= scale;
-        centre += p.translation.vector / n;
-        z += p.rotation * Vector3::z();
-        y += p.rotation * Vector3::y();
-    }
-    let z = z.normalize();
-    let x = y.cross(&z).normalize();
-    let y = z.cross(&x);
-    let mean = Isometry3::from_parts(
-        Translation3::from(centre),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-            Matrix3::from_columns(&[x, y, z]),
-        )),
-    );
-    let inv = mean.inverse();
-    for p in &mut dataset.world_from_camera {
-        *p = inv * *p;
-    }
-    Ok(())
-}
-
-fn dataset_views(exp: &Experiment) -> anyhow::Result<Views> {
-    let d = &exp.data;
-    let Some(path) = &d.path else {
-        bail!(
-            "[data] path: the {} scene folder is required for source = {:?}",
-            if d.source == Source::Llff {
-                "LLFF"
-            } else {
-                "Blender"
-            },
-            d.source
-        );
-    };
-    let (mut dataset, settings_default, unbounded) = match d.source {
-        Source::Llff => (
-            llff::load_llff(path, d.factor)?,
-            (
-                Sampling::InverseDepth {
-                    near: 1.0,
-                    far: f64::INFINITY,
-                },
-                None,
-            ),
-            true,
-        ),
-        _ => {
-            let options = blender::BlenderOptions {
-                max_frames: d.max_frames,
-                only_existing_images: true,
-                ..Default::default()
-            };
-            (
-                blender::load_blender(path, &options)?,
-                (
-                    Sampling::Metric {
-                        near: 2.0,
-                        far: 6.0,
-                    },
-                    Some([1.0; 3]),
-                ),
-                false,
-            )
-        }
-    };
-    if dataset.len() < 3 {
-        bail!(
-            "{}: need at least 3 images, found {}",
-            path.display(),
-            dataset.len()
-        );
-    }
-    if d.source == Source::Llff {
-        normalise_llff(&mut dataset)?;
-    }
-    let n = dataset.len();
-    // BARF: the last 10% (at least one) held out.
-    let held_out = if d.source == Source::Llff {
-        (n / 10).max(1)
-    } else {
-        d.test_views.min(n / 5).max(1)
-    };
-    let split = n - held_out;
-    let times: Vec<f64> = (0..split).map(|i| i as f64).collect();
-    let keep: Vec<usize> = (0..split).step_by(d.subsample.max(1)).collect();
-    let centres: Vec<Vector3<f64>> = dataset
-        .world_from_camera
-        .iter()
-        .map(|p| p.translation.vector)
-        .collect();
-    let mean = centres.iter().sum::<Vector3<f64>>() / n as f64;
-    let spread = centres
-        .iter()
-        .map(|c| (c - mean).norm())
-        .fold(0.0, f64::max);
-    let bounds = if unbounded {
-        SceneBounds {
-            centre: [0.0, 0.0, 2.0],
-            radius: 2.0,
-            unbounded: true,
-        }
-    } else {
-        SceneBounds {
-            centre: [0.0; 3],
-            radius: 1.5,
-            unbounded: false,
-        }
-    };
-    let condition = format!(
-        "{}{}",
-        path.file_name()
-            .map_or("scene".into(), |s| s.to_string_lossy()),
-        if d.subsample > 1 {
-            format!("/{}", d.subsample)
-        } else {
-            String::new()
-        }
-    );
-    Ok(Views {
-        condition,
-        camera: dataset.camera,
-        train_images: keep.iter().map(|&i| dataset.images[i].clone()).collect(),
-        train_times: keep.iter().map(|&i| times[i]).collect(),
-        train_truth: keep.iter().map(|&i| dataset.world_from_camera[i]).collect(),
-        test_images: dataset.images[split..].to_vec(),
-        test_truth: dataset.world_from_camera[split..].to_vec(),
-        settings: resolve_settings(&exp.render, settings_default, &bounds)?,
-        bounds,
-        diameter: 2.0 * spread.max(1e-9),
-    })
-}
-
 /// One method's results, as in `metrics.json`.
 #[derive(Debug, Serialize)]
 struct MethodResult {
@@ -577,6 +237,10 @@ struct MethodResult {
     /// With test-time photometric refinement of each test pose.
     psnr_refined_db: Option<f64>,
     ssim_refined: Option<f64>,
+    /// The same four on a further split of novel views (`psnr_val_db`, `ssim_val`,
+    /// `psnr_val_refined_db`, `ssim_val_refined`).
+    #[serde(flatten)]
+    further_splits: BTreeMap<String, f64>,
     /// Mean squared error of the last 100 training steps.
     final_loss: f64,
     iterations: usize,
@@ -631,10 +295,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let noise_section = input.config.section("noise");
     let field_config =
         RadianceFieldConfig::from_section(&input.config.section("field"), input.run.seed)?;
-    let mut views = match exp.data.source {
-        Source::Synthetic => synthetic_views(&exp)?,
-        _ => dataset_views(&exp)?,
-    };
+    let mut views = Views::load(&exp.data, &exp.orbit, &exp.render)?;
     let noise: PoseNoise = if noise_section.exists()? {
         noise_section.decode()?
     } else if exp.data.source == Source::Llff {
@@ -643,14 +304,11 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         PoseNoise::default()
     };
     noise.validate()?;
-    for (key, value) in [
-        ("pose_warmup", Some(exp.train.pose_warmup)),
-        ("rotation_warmup", exp.train.rotation_warmup),
-        ("field_restart_until", Some(exp.train.field_restart_until)),
-    ] {
-        if let Some(value) = value.filter(|v| !(0.0..=1.0).contains(v)) {
-            bail!("train.{key} = {value} must lie in [0, 1] (a fraction of the steps)");
-        }
+    if !(0.0..=1.0).contains(&exp.train.field_restart_until) {
+        bail!(
+            "[train] field_restart_until = {} must lie in [0, 1] (a fraction of the steps)",
+            exp.train.field_restart_until
+        );
     }
     let initial = noise.apply(&views.train_truth, views.diameter);
     let widened = views.bounds.widened_for(&views.train_truth, &initial);
@@ -681,13 +339,19 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let iterations = input.run.iterations(exp.train.iterations);
     let steps = |fraction: f64| (fraction * iterations as f64).round() as u64;
     let train = &exp.train;
+    let (hold, warmup, rotation_warmup) = PoseTiming {
+        hold: train.pose_hold,
+        warmup: train.pose_warmup,
+        rotation_warmup: train.rotation_warmup.unwrap_or(train.pose_warmup),
+    }
+    .steps(iterations)?;
     input.run_dir.log(format_args!(
         "{}: {} training views of {}×{}, {} held out; field {}; noise {:?}; {} steps of {} rays × {} samples; methods {:?}",
         views.condition,
         views.train_images.len(),
         views.camera.width,
         views.camera.height,
-        views.test_images.len(),
+        views.tests.iter().map(|t| t.images.len()).sum::<usize>(),
         match field_config {
             RadianceFieldConfig::Grid(_) => "grid",
             RadianceFieldConfig::Mlp(_) => "mlp",
@@ -751,8 +415,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 rotation: decay(train.posenet_lr_rotation, iterations),
                 translation: decay(train.posenet_lr_translation, iterations),
                 pose: decay(train.lr_pose, iterations),
-                warmup: steps(train.pose_warmup),
-                rotation_warmup: steps(train.rotation_warmup.unwrap_or(train.pose_warmup)),
+                hold,
+                warmup,
+                rotation_warmup,
             };
             let mut poses = FramePoses::new(
                 init,
@@ -965,61 +630,85 @@ fn evaluate(
         rays: exp.eval.refine_rays,
         lr: exp.train.lr_pose[0],
     };
-    let (mut psnr, mut ssim_sum, mut psnr_ref, mut ssim_ref) = (0.0, 0.0, 0.0, 0.0);
     let (near, far) = match views.settings.sampling {
         Sampling::Metric { near, far } => (near, far),
         Sampling::InverseDepth { near, .. } => (near, 10.0 * near),
     };
-    for (k, (image, truth)) in views.test_images.iter().zip(&views.test_truth).enumerate() {
-        let pose = errors.alignment.gt_to_learned(truth);
-        let view = render_view(
-            &mut renderer,
-            field,
-            &views.settings,
-            &views.camera,
-            &pose,
-            4096,
-        );
-        psnr += crate::image::psnr(view.image.data(), image.data());
-        ssim_sum += ssim(&view.image, image);
-        if k < exp.eval.saved_views {
-            view.image
-                .beside(image)
-                .save_png(unit.file(&format!("view_{k}"), "png"))?;
-            depth_image(
-                views.camera.width,
-                views.camera.height,
-                &view.depth,
-                &view.opacity,
-                near,
-                far,
-            )
-            .save_png(unit.file(&format!("depth_{k}"), "png"))?;
-        }
-        if refinement.iterations > 0 {
-            let refined = eval::refine_pose(
-                &mut renderer,
-                field,
-                &views.settings,
-                &views.camera,
-                image,
-                &pose,
-                &refinement,
-                &mut rng,
-            );
+    let mut scores = Vec::with_capacity(views.tests.len());
+    for test in &views.tests {
+        let (mut psnr, mut ssim_sum, mut psnr_ref, mut ssim_ref) = (0.0, 0.0, 0.0, 0.0);
+        for (k, (image, truth)) in test.images.iter().zip(&test.truth).enumerate() {
+            let pose = errors.alignment.gt_to_learned(truth);
             let view = render_view(
                 &mut renderer,
                 field,
                 &views.settings,
                 &views.camera,
-                &refined,
+                &pose,
                 4096,
             );
-            psnr_ref += crate::image::psnr(view.image.data(), image.data());
-            ssim_ref += ssim(&view.image, image);
+            psnr += crate::image::psnr(view.image.data(), image.data());
+            ssim_sum += ssim(&view.image, image);
+            if test.name.is_none() && k < exp.eval.saved_views {
+                view.image
+                    .beside(image)
+                    .save_png(unit.file(&format!("view_{k}"), "png"))?;
+                depth_image(
+                    views.camera.width,
+                    views.camera.height,
+                    &view.depth,
+                    &view.opacity,
+                    near,
+                    far,
+                )
+                .save_png(unit.file(&format!("depth_{k}"), "png"))?;
+            }
+            if refinement.iterations > 0 {
+                let refined = eval::refine_pose(
+                    &mut renderer,
+                    field,
+                    &views.settings,
+                    &views.camera,
+                    image,
+                    &pose,
+                    &refinement,
+                    &mut rng,
+                );
+                let view = render_view(
+                    &mut renderer,
+                    field,
+                    &views.settings,
+                    &views.camera,
+                    &refined,
+                    4096,
+                );
+                psnr_ref += crate::image::psnr(view.image.data(), image.data());
+                ssim_ref += ssim(&view.image, image);
+            }
+        }
+        let n = test.images.len().max(1) as f64;
+        let refined = refinement.iterations > 0;
+        scores.push((
+            test.name.clone(),
+            [
+                psnr / n,
+                ssim_sum / n,
+                if refined { psnr_ref / n } else { f64::NAN },
+                if refined { ssim_ref / n } else { f64::NAN },
+            ],
+        ));
+    }
+    let [psnr, ssim_mean, psnr_ref, ssim_ref] = scores[0].1;
+    let mut further_splits = BTreeMap::new();
+    for (name, [psnr, ssim, psnr_ref, ssim_ref]) in &scores[1..] {
+        let name = name.as_deref().unwrap_or("other");
+        further_splits.insert(format!("psnr_{name}_db"), *psnr);
+        further_splits.insert(format!("ssim_{name}"), *ssim);
+        if refinement.iterations > 0 {
+            further_splits.insert(format!("psnr_{name}_refined_db"), *psnr_ref);
+            further_splits.insert(format!("ssim_{name}_refined"), *ssim_ref);
         }
     }
-    let n = views.test_images.len().max(1) as f64;
     let refined = refinement.iterations > 0;
     Ok(MethodResult {
         rot_err_deg: errors.rot_err_deg,
@@ -1030,10 +719,11 @@ fn evaluate(
         init_rot_err_deg: init_errors.as_ref().map(|e| e.rot_err_deg),
         init_rot_err_relative_deg: init_errors.as_ref().map(|e| e.rot_err_relative_deg),
         init_trans_err_su: init_errors.as_ref().map(|e| e.trans_err),
-        psnr_db: psnr / n,
-        ssim: ssim_sum / n,
-        psnr_refined_db: refined.then_some(psnr_ref / n),
-        ssim_refined: refined.then_some(ssim_ref / n),
+        psnr_db: psnr,
+        ssim: ssim_mean,
+        psnr_refined_db: refined.then_some(psnr_ref),
+        ssim_refined: refined.then_some(ssim_ref),
+        further_splits,
         final_loss,
         iterations,
     })
@@ -1146,7 +836,7 @@ mod tests {
         let moved = |delta: Isometry3<f64>| {
             centre_leaves_view(&camera, [0.0; 3], &truth, &[delta * truth[0]])
         };
-        let turn = Isometry3::rotation(Vector3::y() * 60f64.to_radians());
+        let turn = Isometry3::rotation(nalgebra::Vector3::y() * 60f64.to_radians());
         assert_eq!(moved(turn), 0);
         assert_eq!(moved(Isometry3::translation(1.2, 0.0, 0.0)), 0);
         assert_eq!(moved(Isometry3::translation(1.7, 0.0, 0.0)), 1);

@@ -200,7 +200,7 @@ impl<'a> Trainer<'a> {
             bail!("the loss is {loss} at iteration {it}");
         }
         self.grad_params.fill(0.0);
-        let trainable = self.poses.is_trainable();
+        let trainable = self.poses.is_trained_at(it);
         for g in &mut self.pose_grads {
             *g = PoseGradient::new();
         }
@@ -358,6 +358,7 @@ pub(super) mod tests {
                         translation: decay(1e-3),
                         pose: decay(1e-3),
                         warmup: 0,
+                        hold: 0,
                         rotation_warmup: 0,
                     },
                 ),

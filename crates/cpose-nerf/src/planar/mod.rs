@@ -148,6 +148,9 @@ struct TrainConfig {
     pixels_per_step: usize,
     /// Learning rate of the neural image.
     lr_field: f64,
+    /// Fraction of the steps during which the warps are held while the neural image fits the
+    /// patches as they are.
+    pose_hold: f64,
     /// Learning rate of the free translations (BARF, spline; the paper's 1e-3).
     lr_translation: f64,
     /// Learning rate of the free rotations (BARF, spline; the paper's 2e-4).
@@ -171,6 +174,7 @@ impl Default for TrainConfig {
             iterations: 2000,
             pixels_per_step: 4096,
             lr_field: 1e-3,
+            pose_hold: 0.0,
             lr_translation: 1e-3,
             lr_rotation: 2e-4,
             posenet_lr_translation: 1e-4,
@@ -406,6 +410,14 @@ impl Setup {
         }
         let field = FieldChoice::from_section(&config.section("field"))?;
         field.init(0).map_err(|e| bad(format!("[field] {e}")))?;
+        let iterations = input.run.iterations(t.iterations);
+        if !(0.0..1.0).contains(&t.pose_hold) {
+            return Err(bad(format!(
+                "[train] pose_hold = {} must lie in [0, 1): a fraction of the {iterations} steps \
+                 that leaves some to align the patches",
+                t.pose_hold
+            )));
+        }
         let mut methods = t.methods.clone();
         methods.sort();
         methods.dedup();
@@ -418,9 +430,10 @@ impl Setup {
             field,
             posenet,
             schedule: Schedule {
-                iterations: input.run.iterations(t.iterations),
+                iterations,
                 pixels_per_step: t.pixels_per_step,
                 lr_field: t.lr_field,
+                pose_hold: (t.pose_hold * iterations as f64).round() as usize,
             },
             rates: PoseRates {
                 translation: t.lr_translation,

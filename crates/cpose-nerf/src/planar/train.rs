@@ -63,6 +63,9 @@ pub struct Schedule {
     pub pixels_per_step: usize,
     /// Learning rate of the neural image.
     pub lr_field: f64,
+    /// Steps during which the warps are held while the neural image fits the patches as they
+    /// are (the warps' gradients are not even computed).
+    pub pose_hold: usize,
 }
 
 /// What one run measured.
@@ -205,6 +208,15 @@ impl<'a> Trainer<'a> {
         self.field_grad.fill(0.0);
         self.field
             .backward(&self.grad_rgb, &mut self.field_grad, &mut self.grad_points);
+        self.adam.step(
+            self.field.params_mut(),
+            &self.field_grad,
+            self.schedule.lr_field,
+        );
+        if self.it < self.schedule.pose_hold {
+            self.it += 1;
+            return Ok(loss);
+        }
         self.warp_grad.fill(0.0);
         for (b, &pick) in self.picks.iter().enumerate() {
             let i = pick / per_patch;
@@ -217,11 +229,6 @@ impl<'a> Trainer<'a> {
                 self.warp_grad[i * dim + k] += g[0] * jac[k][0] + g[1] * jac[k][1];
             }
         }
-        self.adam.step(
-            self.field.params_mut(),
-            &self.field_grad,
-            self.schedule.lr_field,
-        );
         self.model.step(&self.warp_grad, self.it)?;
         self.it += 1;
         Ok(loss)
