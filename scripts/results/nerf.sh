@@ -1,10 +1,11 @@
 #!/bin/sh
-# The tables of docs/results/nerf.md: NeRF from noisy poses on the built-in scene (the paper's
-# noise grid, field restarts, the PoseNet encoding ablation) and from unknown poses on LLFF fern.
+# The tables of docs/results/nerf.md: NeRF from noisy poses on the Lego orbit (the paper's noise
+# grid) and with BARF's own Blender protocol, on the built-in scene (the grid, field restarts,
+# the PoseNet encoding ablation), and from unknown or perturbed poses on LLFF fern.
 #
 #   scripts/results/nerf.sh [TABLE...]
 #
-# TABLE is one of grid restarts restarts_grid llff llff_colmap encoding (default:
+# TABLE is one of lego lego_barf grid restarts restarts_grid llff llff_colmap encoding (default:
 # all, in that order). Runs go to runs/results/nerf/TABLE/NAME (common.sh: environment); a
 # finished run is kept and an interrupted one resumed, so the script continues where it stopped.
 # The tables are printed to stdout. The grid is 13 runs of about 15 minutes each on two cores;
@@ -14,6 +15,8 @@ set -eu
 . "$(dirname "$0")/common.sh"
 out=${CPOSE_RESULTS:-runs/results}/nerf
 synthetic=configs/nerf_synthetic.toml
+lego=configs/nerf_lego_orbit.toml
+lego_data="data.path=\"$data/nerf_synthetic/lego\""
 fern=configs/llff_fern.toml
 fern_data="data.path=\"$data/llff/fern\""
 posenet_only='train.methods=["posenet"]'
@@ -50,21 +53,49 @@ cell() {
     exit 2
 }
 
-table_grid() {
-    run grid/true-poses "$synthetic" --set 'train.methods=["true_poses"]'
-    dirs="$out/grid/true-poses"
+# grid_runs DIR CONFIG [ARGS...]: the true poses once, then PoseNet and BARF at every cell of
+# the grid, into $out/DIR/true-poses and $out/DIR/<cell>; sets $dirs to those folders.
+grid_runs() {
+    grid_dir=$1
+    grid_config=$2
+    shift 2
+    run "$grid_dir/true-poses" "$grid_config" "$@" --set 'train.methods=["true_poses"]'
+    dirs="$out/$grid_dir/true-poses"
     for c in $cells; do
         name=${c%%:*}
-        # shellcheck disable=SC2046 # three words
-        set -- $(cell "$name")
-        run "grid/$name" "$synthetic" --set 'train.methods=["posenet","barf"]' \
-            --set "noise.max_rotation_deg=$1" --set "noise.max_translation=$2" \
-            --set "posenet.translation_scale=$3"
-        dirs="$dirs $out/grid/$name"
+        noise=$(cell "$name")
+        r=${noise%% *}
+        rest=${noise#* }
+        t=${rest%% *}
+        s=${rest#* }
+        run "$grid_dir/$name" "$grid_config" "$@" --set 'train.methods=["posenet","barf"]' \
+            --set "noise.max_rotation_deg=$r" --set "noise.max_translation=$t" \
+            --set "posenet.translation_scale=$s"
+        dirs="$dirs $out/$grid_dir/$name"
     done
+}
+
+grid_metrics=init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db
+
+table_lego() {
+    grid_runs lego "$lego" --set "$lego_data"
     # shellcheck disable=SC2086
-    table "The paper's noise grid (configs/nerf_synthetic.toml)" \
-        init_rot_err_deg,init_trans_err_su,rot_err_deg,trans_err_su,psnr_db,psnr_refined_db,ssim $dirs
+    table "The paper's noise grid on the Lego orbit (configs/nerf_lego_orbit.toml)" \
+        "$grid_metrics,psnr_val_db" $dirs
+}
+
+table_lego_barf() {
+    run lego_barf/lego "configs/nerf_lego_barf.toml" --set "$lego_data"
+    table "BARF's Blender protocol on Lego (configs/nerf_lego_barf.toml)" \
+        init_rot_err_deg,rot_err_deg,trans_err_su,psnr_db,psnr_refined_db,ssim,wall_s \
+        "$out/lego_barf/lego"
+}
+
+table_grid() {
+    grid_runs grid "$synthetic"
+    # shellcheck disable=SC2086
+    table "The paper's noise grid on the built-in scene (configs/nerf_synthetic.toml)" \
+        "$grid_metrics,ssim" $dirs
 }
 
 table_restarts() {
@@ -145,7 +176,7 @@ table_encoding() {
         "$out/$d/f10-c2f"
 }
 
-tables=$(tables_from "grid restarts restarts_grid llff llff_colmap encoding" "$@")
+tables=$(tables_from "lego lego_barf grid restarts restarts_grid llff llff_colmap encoding" "$@")
 for t in $tables; do
     "table_$t"
 done

@@ -25,8 +25,8 @@ table_cat() {
 }
 
 table_girl() {
-    run girl configs/planar_cat.toml --set "image.path=\"$data/planar/girl.jpg\""
-    table "The girl photograph (configs/planar_cat.toml with image.path)" "$metrics" "$out/girl"
+    run girl configs/planar_girl.toml --set "image.path=\"$data/planar/girl.jpg\""
+    table "The paper's girl photograph (configs/planar_girl.toml)" "$metrics" "$out/girl"
 }
 
 tables=$(tables_from "procedural cat girl" "$@")

@@ -267,7 +267,18 @@ impl Recorder {
 /// CPU seconds (user + system) this process has used so far, from `/proc/self/stat`; `None`
 /// where that file does not exist (not Linux).
 pub fn process_cpu_secs() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    cpu_secs_of("/proc/self/stat")
+}
+
+/// CPU seconds (user + system) the calling thread has used so far, from
+/// `/proc/thread-self/stat`; `None` where that file does not exist.
+pub fn thread_cpu_secs() -> Option<f64> {
+    cpu_secs_of("/proc/thread-self/stat")
+}
+
+/// utime + stime of a `stat` file of proc(5), seconds.
+fn cpu_secs_of(path: &str) -> Option<f64> {
+    let stat = std::fs::read_to_string(path).ok()?;
     // Fields after the parenthesised command name (which may hold spaces); utime and stime are
     // fields 14 and 15 of proc(5), in clock ticks of USER_HZ = 100 on Linux.
     let rest = &stat[stat.rfind(')')? + 2..];
@@ -441,5 +452,31 @@ mod tests {
         }
         assert!(after - before >= 0.2, "{before} → {after}");
         assert!(peak > 1 << 20 && peak < 1 << 40, "{peak}");
+    }
+
+    /// A thread's own clock counts its work, not another thread's: a busy thread's time grows
+    /// while an idle one's stays.
+    #[test]
+    fn thread_cpu_time_is_the_threads_own() {
+        let Some(idle_before) = thread_cpu_secs() else {
+            eprintln!("skipped: no /proc/thread-self on this system");
+            return;
+        };
+        let busy = std::thread::spawn(|| {
+            let before = thread_cpu_secs().unwrap();
+            let start = Instant::now();
+            let (mut x, mut after) = (0u64, before);
+            while after - before < 0.2 && start.elapsed().as_secs() < 60 {
+                for _ in 0..100_000 {
+                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                }
+                after = thread_cpu_secs().unwrap();
+            }
+            after - before
+        })
+        .join()
+        .unwrap();
+        assert!(busy >= 0.2, "{busy}");
+        assert!(thread_cpu_secs().unwrap() - idle_before < 0.1);
     }
 }

@@ -70,7 +70,7 @@ use crate::checkpoint::{Reader, Writer};
 use crate::config::Config;
 use crate::plot::{self, CURVES_HEADER};
 use crate::progress::Progress;
-use crate::provenance::process_cpu_secs;
+use crate::provenance::{process_cpu_secs, thread_cpu_secs};
 use crate::registry::TaskInput;
 use crate::run_dir::RunDir;
 
@@ -580,6 +580,12 @@ impl Shared<'_, '_> {
         let unit_dir = PathBuf::from("units").join(name);
         std::fs::create_dir_all(dir.file(&unit_dir))
             .with_context(|| format!("cannot create {}", dir.file(&unit_dir).display()))?;
+        // Units side by side are single-threaded inside: the thread's time is the unit's.
+        let cpu_clock: fn() -> Option<f64> = if self.study.parallel {
+            thread_cpu_secs
+        } else {
+            process_cpu_secs
+        };
         let mut unit = Unit {
             key: key.clone(),
             name: name.to_owned(),
@@ -591,7 +597,8 @@ impl Shared<'_, '_> {
             checkpoint_secs: self.input.run.checkpoint_secs,
             hash: self.hash.clone(),
             started: Instant::now(),
-            cpu_at_start: process_cpu_secs(),
+            cpu_clock,
+            cpu_at_start: cpu_clock(),
             earlier_wall_s: 0.0,
             earlier_cpu_s: 0.0,
             last_checkpoint: Instant::now(),
@@ -612,9 +619,7 @@ impl Shared<'_, '_> {
         if !metrics.0.contains_key("wall_s") {
             metrics.insert("wall_s", wall_s);
         }
-        // Process CPU time is the unit's own only when units run one at a time.
-        if !self.study.parallel
-            && !metrics.0.contains_key("cpu_s")
+        if !metrics.0.contains_key("cpu_s")
             && let Some(cpu) = cpu_s
         {
             metrics.insert("cpu_s", cpu);
@@ -715,6 +720,8 @@ pub struct Unit<'a> {
     checkpoint_secs: f64,
     hash: String,
     started: Instant,
+    /// The clock of the unit's CPU time: the process's, or the thread's for units side by side.
+    cpu_clock: fn() -> Option<f64>,
     cpu_at_start: Option<f64>,
     earlier_wall_s: f64,
     earlier_cpu_s: f64,
@@ -863,7 +870,7 @@ impl Unit<'_> {
     /// Wall and CPU seconds of the unit so far, over every session.
     fn elapsed(&self) -> (f64, Option<f64>) {
         let wall = self.earlier_wall_s + self.started.elapsed().as_secs_f64();
-        let cpu = match (self.cpu_at_start, process_cpu_secs()) {
+        let cpu = match (self.cpu_at_start, (self.cpu_clock)()) {
             (Some(a), Some(b)) if self.earlier_cpu_s.is_finite() => {
                 Some(self.earlier_cpu_s + b - a)
             }
