@@ -22,14 +22,14 @@ table_interp() {
     run interp-no-anchor-windows configs/events_interp.toml --set 'experiment.known_poses=[6]' \
         --set 'train.methods=["posenet"]' --set train.anchor_windows=0
     table "Poses known at K views (configs/events_interp.toml)" \
-        trans_err_su,trans_err_aligned_su,rot_err_aligned_deg,psnr_db,ssim,wall_s \
+        trans_err_su,trans_err_aligned_su,rot_err_aligned_deg,rot_err_relative_deg,psnr_db,ssim,wall_s \
         "$out/interp" "$out/interp-true-poses" "$out/interp-no-anchor-windows"
 }
 
 table_calib() {
     run calib configs/events_calib.toml
     table "Turntable axis mis-calibrated (configs/events_calib.toml)" \
-        rot_err_aligned_deg,trans_err_aligned_su,psnr_db,ssim,wall_s "$out/calib"
+        rot_err_aligned_deg,rot_err_relative_deg,trans_err_aligned_su,psnr_db,ssim,wall_s "$out/calib"
 }
 
 tables=$(tables_from "interp calib" "$@")

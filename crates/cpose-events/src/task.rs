@@ -52,6 +52,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
+use cpose_core::geometry::rotation_angle_between;
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
@@ -471,6 +472,9 @@ struct MethodResult {
     /// scene's scale nor its frame).
     rot_err_aligned_deg: f64,
     trans_err_aligned_su: f64,
+    /// The aligned rotation error left after removing the best common rotation of all cameras
+    /// ([`cpose_core::eval::BarfPoseErrors::rot_err_relative_deg`]).
+    rot_err_relative_deg: f64,
     /// Held-out views after colour correction.
     psnr_db: Option<f64>,
     ssim: Option<f64>,
@@ -795,7 +799,7 @@ fn pose_errors(truth: &[Isometry3<f64>], estimate: &[Isometry3<f64>]) -> (f64, f
     let n = truth.len().max(1) as f64;
     let (mut rot, mut trans, mut max) = (0.0, 0.0, 0.0f64);
     for (t, e) in truth.iter().zip(estimate) {
-        rot += t.rotation.angle_to(&e.rotation).to_degrees() / n;
+        rot += rotation_angle_between(&t.rotation, &e.rotation).to_degrees() / n;
         let d = (t.translation.vector - e.translation.vector).norm();
         trans += d / n;
         max = max.max(d);
@@ -908,6 +912,7 @@ fn evaluate(
         trans_err_max_su: max_trans_err,
         rot_err_aligned_deg: aligned.rot_err_deg,
         trans_err_aligned_su: aligned.trans_err,
+        rot_err_relative_deg: aligned.rot_err_relative_deg,
         psnr_db,
         ssim: ssim_mean,
         final_loss,
