@@ -1,18 +1,19 @@
 #!/bin/sh
 # The tables of docs/results/trajectory.md: pose fields fitted to sparse poses, with and without
 # the gyroscope, scored on the held-out poses: the built-in synthetic motion and 20 s of the real
-# EuRoC V1_02 flight.
+# EuRoC V1_02 flight; PoseNet's frequency bands against the pose spacing.
 #
 #   scripts/results/trajectory.sh [TABLE...]
 #
-# TABLE is synthetic or euroc (default: both). Runs go to runs/results/trajectory/NAME
-# (common.sh: environment); a finished run is kept and an interrupted one resumed. The tables are
-# printed to stdout.
+# TABLE is synthetic, euroc or bands (default: all three). Runs go to
+# runs/results/trajectory/NAME (common.sh: environment); a finished run is kept and an
+# interrupted one resumed. The tables are printed to stdout.
 set -eu
 # shellcheck source=common.sh
 . "$(dirname "$0")/common.sh"
 out=${CPOSE_RESULTS:-runs/results}/trajectory
-metrics=rot_err_deg,rot_rmse_deg,trans_err_m,ang_vel_rmse_rad_s
+metrics=rot_err_deg,rot_rmse_deg,trans_err_m,ang_vel_rmse_rad_s,known_rot_err_deg,fit_steps,fit_stop
+euroc_data="data.path=\"$data/euroc/V1_02_excerpt\""
 
 table_synthetic() {
     run synthetic configs/trajectory_fit.toml
@@ -21,12 +22,27 @@ table_synthetic() {
 }
 
 table_euroc() {
-    run euroc configs/euroc_v102_fit.toml --set "data.path=\"$data/euroc/V1_02_excerpt\""
+    run euroc configs/euroc_v102_fit.toml --set "$euroc_data"
     table "EuRoC V1_02, every 20th pose, real gyroscope (configs/euroc_v102_fit.toml)" \
         "$metrics" "$out/euroc"
 }
 
-tables=$(tables_from "synthetic euroc" "$@")
+table_bands() {
+    dirs=
+    for bands in 2 3 4 5 6; do
+        only='fit.fields=["posenet"]'
+        run "bands/synthetic-f$bands" configs/trajectory_fit.toml --set "$only" \
+            --set 'fit.imu=["none"]' --set "fields.posenet.bands=$bands"
+        run "bands/euroc-f$bands" configs/euroc_v102_fit.toml --set "$euroc_data" \
+            --set "$only" --set 'fit.imu=["none"]' --set "fields.posenet.bands=$bands"
+        dirs="$dirs $out/bands/synthetic-f$bands $out/bands/euroc-f$bands"
+    done
+    # shellcheck disable=SC2086
+    table "PoseNet's bands F, poses only (synthetic: every 0.2 s of 10 s; EuRoC: every 0.5 s of 20 s)" \
+        rot_err_deg,trans_err_m,known_rot_err_deg,known_trans_err_m,fit_steps,fit_stop $dirs
+}
+
+tables=$(tables_from "synthetic euroc bands" "$@")
 for t in $tables; do
     "table_$t"
 done

@@ -130,6 +130,8 @@ struct FitConfig {
     lr_drops: usize,
     /// IMU modes to compare: `"none"`, `"loose"`, `"tight"`, `"accel"`, `"combined"`.
     imu: Vec<ImuMode>,
+    /// The `[fields.<name>]` to fit (default: all of them).
+    fields: Option<Vec<String>>,
     /// Weight of the pose loss (squared error of quaternions and of normalised positions: about
     /// 1e-4 at 1° of rotation error). Against the L1 gyro residual of real data (about 0.1 rad/s
     /// of noise and vibration) a weight near 1000 balances the two; exact IMU readings want 1.
@@ -163,6 +165,7 @@ impl Default for FitConfig {
             lr_factor: stop.lr_factor,
             lr_drops: stop.lr_drops,
             imu: vec![ImuMode::None, ImuMode::Tight],
+            fields: None,
             pose_weight: 1.0,
             gyro_weight: 1.0,
             accel_weight: 1.0,
@@ -914,6 +917,20 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             config.path().display()
         );
     }
+    let fitted: Vec<String> = match &exp.fit.fields {
+        None => exp.fields.keys().cloned().collect(),
+        Some(names) => {
+            if let Some(unknown) = names.iter().find(|n| !exp.fields.contains_key(*n)) {
+                bail!(
+                    "{}: [fit] fields names {unknown:?}, which has no [fields.{unknown}] table \
+                     (tables: {})",
+                    config.path().display(),
+                    exp.fields.keys().cloned().collect::<Vec<_>>().join(", ")
+                );
+            }
+            names.clone()
+        }
+    };
     if exp.fields.contains_key(INTERP) {
         bail!(
             "{}: [fields.{INTERP}] is the name of the interpolation reference; call the field otherwise",
@@ -971,7 +988,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     // Units: the interpolation reference once (it uses no IMU), then every field per IMU mode.
     let mut units = vec![UnitKey::new(ImuMode::None.key(), INTERP, seed)];
     for &mode in &modes {
-        for name in exp.fields.keys() {
+        for name in &fitted {
             units.push(UnitKey::new(mode.key(), name.as_str(), seed));
         }
     }

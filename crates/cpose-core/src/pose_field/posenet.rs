@@ -25,11 +25,11 @@
 //! through every sample and still swing between them: the fit is exact on the samples and
 //! wrong everywhere else. Take the largest `F` whose finest band spans at least four sample
 //! intervals, `T / (w · 2^(F−1)) ≥ 4Δ`, i.e. `F = ⌊1 + log2(T / (4wΔ))⌋`
-//! ([`bands_for_spacing`]). On the built-in 10-s hand-held motion with poses every 0.2 s
-//! (rule: 4) the held-out rotation error was 0.17°, 0.16°, 0.39° and 4.3° for 3, 4, 5 and 6
-//! bands, all fitted to 0.01° on the samples themselves. A config table of kind `"posenet"`
-//! without `bands` takes this rule from the times it is fitted to
-//! ([`crate::registry::FieldContext::frame_times_secs`]).
+//! ([`bands_for_spacing`]). Fewer bands interpolate positions more smoothly, more bands follow
+//! fast turns; beyond the rule the held-out error grows several-fold while the samples are still
+//! fitted exactly (measured on a synthetic and a real flight in `docs/results/trajectory.md`).
+//! A config table of kind `"posenet"` without `bands` takes this rule from the times it is
+//! fitted to ([`crate::registry::FieldContext::frame_times_secs`]).
 
 use faer::Accum;
 use nalgebra::{Quaternion, Vector3};
