@@ -2,8 +2,9 @@
 //! Markdown table (a sweep's summary).
 //!
 //! Every numeric leaf of a `metrics.json` is a cell: its last key names the column, the keys
-//! before it (with the run folder's name in front) name the row. A `null` leaf (a metric that
-//! was not computed) is an empty cell. A JSON integer (a count such as `frames: 500`) prints as
+//! before it (with the run folder's name in front) name the row; the strings and booleans beside
+//! numbers (`fit_stop`, `fit_converged`) are cells too. A `null` leaf (a metric that was not
+//! computed) is an empty cell. A JSON integer (a count such as `frames: 500`) prints as
 //! an integer; other numbers with four significant digits. So the NeRF task's
 //! `{"synthetic": {"posenet": {"rot_err_deg": 0.3}}}` in `runs/rm60` is the cell
 //! (`rm60 synthetic/posenet`, `rot_err_deg`).
@@ -12,11 +13,11 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use cpose_core::study::format_json_number;
-use serde_json::{Number, Value};
+use cpose_core::study::format_value;
+use serde_json::Value;
 
-/// One row: its name and its cells by column (`None`: `null`).
-type Row = (String, BTreeMap<String, Option<Number>>);
+/// One row: its name and its cells by column (numbers, strings, booleans or `null`).
+type Row = (String, BTreeMap<String, Value>);
 
 /// The Markdown table of the runs in `dirs`, restricted to `columns` (in that order) when not
 /// empty, else all columns sorted by name.
@@ -58,7 +59,7 @@ pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<Str
         out.push_str(&format!("| {name} |"));
         for n in &names {
             match cells.get(n) {
-                Some(Some(v)) => out.push_str(&format!(" {} |", format_json_number(v))),
+                Some(v) if !v.is_null() => out.push_str(&format!(" {} |", format_value(v))),
                 _ => out.push_str(" |"),
             }
         }
@@ -73,15 +74,12 @@ fn collect_rows(value: &Value, run: &str, path: &str, rows: &mut Vec<Row>) {
     let Value::Object(map) = value else {
         return;
     };
-    let cells: BTreeMap<String, Option<Number>> = map
+    let cells: BTreeMap<String, Value> = map
         .iter()
-        .filter_map(|(k, v)| match v {
-            Value::Null => Some((k.clone(), None)),
-            Value::Number(x) => Some((k.clone(), Some(x.clone()))),
-            _ => None,
-        })
+        .filter(|(_, v)| !(v.is_object() || v.is_array()))
+        .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
-    if !cells.is_empty() {
+    if map.values().any(Value::is_number) {
         let name = if path.is_empty() {
             run.to_owned()
         } else {
@@ -155,14 +153,14 @@ mod tests {
             run.join("metrics.json"),
             r#"{"baseline": {"frames": 500, "lost_frames": 0, "held_out_poses": 129,
                 "big": 12345678901, "negative": -3, "ate_rmse_cm": 500.0, "psnr_db": 27.123456,
-                "ratio": 0.000123, "zero": 0.0}}"#,
+                "ratio": 0.000123, "zero": 0.0, "fit_stop": "plateau", "fit_converged": false}}"#,
         )
         .unwrap();
         let table = metrics_table(&[run], &[]).unwrap();
         let expected = "\
-| run | ate_rmse_cm | big | frames | held_out_poses | lost_frames | negative | psnr_db | ratio | zero |
-|---|---|---|---|---|---|---|---|---|---|
-| slam baseline | 500.0 | 12345678901 | 500 | 129 | 0 | -3 | 27.12 | 1.230e-4 | 0 |
+| run | ate_rmse_cm | big | fit_converged | fit_stop | frames | held_out_poses | lost_frames | negative | psnr_db | ratio | zero |
+|---|---|---|---|---|---|---|---|---|---|---|---|
+| slam baseline | 500.0 | 12345678901 | false | plateau | 500 | 129 | 0 | -3 | 27.12 | 1.230e-4 | 0 |
 ";
         assert_eq!(table, expected);
     }

@@ -538,14 +538,17 @@ fn train_steps(
             let loss = mean(&recent, done);
             // Undefined while the cameras' centres still coincide (an unknown-pose start).
             let errors = barf_pose_errors(truth, trainer.poses().current(), ReflectionFix::Kabsch)
-                .map_or((f64::NAN, f64::NAN), |e| (e.rot_err_deg, e.trans_err));
+                .map_or([f64::NAN; 3], |e| {
+                    [e.rot_err_deg, e.rot_err_relative_deg, e.trans_err]
+                });
             unit.report(
                 done,
                 &[
                     ("loss", loss),
                     ("psnr_train_db", -10.0 * loss.log10()),
-                    ("rot_err_deg", errors.0),
-                    ("trans_err_su", errors.1),
+                    ("rot_err_deg", errors[0]),
+                    ("rot_err_relative_deg", errors[1]),
+                    ("trans_err_su", errors[2]),
                 ],
             );
         }
