@@ -5,7 +5,7 @@
 #
 #   scripts/results/events.sh [TABLE...]
 #
-# TABLE is interp or calib (default: both). Runs go to runs/results/events/NAME (common.sh:
+# TABLE is interp, calib or hold (default: all three). Runs go to runs/results/events/NAME (common.sh:
 # environment); a finished run is kept and an interrupted one resumed. The tables are printed to
 # stdout.
 set -eu
@@ -32,7 +32,14 @@ table_calib() {
         rot_err_aligned_deg,rot_err_relative_deg,trans_err_aligned_su,psnr_db,ssim,wall_s "$out/calib"
 }
 
-tables=$(tables_from "interp calib" "$@")
+table_hold() {
+    run interp-hold10 configs/events_interp.toml --set 'experiment.known_poses=[6]' \
+        --set 'train.methods=["posenet"]' --set train.pose_hold=0.1
+    table "PoseNet at K = 6 with its poses held for the first 10% of the steps" \
+        trans_err_su,trans_err_aligned_su,rot_err_aligned_deg,psnr_db,ssim "$out/interp-hold10"
+}
+
+tables=$(tables_from "interp calib hold" "$@")
 for t in $tables; do
     "table_$t"
 done

@@ -5,7 +5,7 @@
 #
 #   scripts/results/planar.sh [TABLE...]
 #
-# TABLE is procedural, cat or girl (default: all three). Runs go to runs/results/planar/NAME
+# TABLE is procedural, cat, girl or hold (default: all four). Runs go to runs/results/planar/NAME
 # (common.sh: environment); a finished run is kept and an interrupted one resumed. The tables are
 # printed to stdout.
 set -eu
@@ -29,7 +29,17 @@ table_girl() {
     table "The paper's girl photograph (configs/planar_girl.toml)" "$metrics" "$out/girl"
 }
 
-tables=$(tables_from "procedural cat girl" "$@")
+table_hold() {
+    two='train.methods=["posenet","barf"]'
+    run cat-hold10 configs/planar_cat.toml --set "image.path=\"$data/planar/cat.jpg\"" \
+        --set "$two" --set train.pose_hold=0.1
+    run girl-hold10 configs/planar_girl.toml --set "image.path=\"$data/planar/girl.jpg\"" \
+        --set "$two" --set train.pose_hold=0.1
+    table "Warps held for the first 10% of the steps (--set train.pose_hold=0.1)" "$metrics" \
+        "$out/cat-hold10" "$out/girl-hold10"
+}
+
+tables=$(tables_from "procedural cat girl hold" "$@")
 for t in $tables; do
     "table_$t"
 done

@@ -493,3 +493,66 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         diameter: 2.0 * spread.max(1e-9),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The Lego orbit as a sequence: every other view trained on at its own number as its time,
+    /// held-out views from between them, and a further split scored beside them.
+    #[test]
+    fn a_blender_sequence_trains_on_every_other_view_and_holds_out_the_rest() {
+        let Some(data_dir) = cpose_core::fs::shared_data_dir() else {
+            println!("skipped: shared data folder ../shared/data not found");
+            return;
+        };
+        let data = DataConfig {
+            source: Source::Blender,
+            path: Some(data_dir.join("nerf_synthetic/lego")),
+            factor: Some(4),
+            subsample: 2,
+            split: "test".to_owned(),
+            sequence: true,
+            eval_split: Some("val".to_owned()),
+            eval_views: 3,
+            max_frames: Some(20),
+            test_views: 4,
+            ..DataConfig::default()
+        };
+        let views =
+            Views::load(&data, &MonocularOrbit::default(), &RenderConfig::default()).unwrap();
+        assert_eq!(views.condition, "lego/2");
+        assert_eq!((views.camera.width, views.camera.height), (100, 100));
+        let expected: Vec<f64> = (0..10).map(|k| (2 * k) as f64).collect();
+        assert_eq!(views.train_times, expected);
+        assert_eq!(views.tests.len(), 2);
+        assert_eq!(views.tests[0].name, None);
+        assert_eq!(views.tests[0].images.len(), 4);
+        assert_eq!(views.tests[1].name.as_deref(), Some("val"));
+        assert_eq!(views.tests[1].truth.len(), 3);
+        // The held-out views lie between training views: none coincides with one.
+        for truth in &views.tests[0].truth {
+            assert!(
+                views
+                    .train_truth
+                    .iter()
+                    .all(|t| (t.translation.vector - truth.translation.vector).norm() > 0.1)
+            );
+        }
+        // Without views between the training frames and without a further split: an error.
+        let none_held = DataConfig {
+            subsample: 1,
+            eval_split: None,
+            ..data
+        };
+        let e = Views::load(
+            &none_held,
+            &MonocularOrbit::default(),
+            &RenderConfig::default(),
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(e.contains("subsample = 2"), "{e}");
+    }
+}

@@ -149,7 +149,7 @@ struct TrainConfig {
     /// Learning rate of the neural image.
     lr_field: f64,
     /// Fraction of the steps during which the warps are held while the neural image fits the
-    /// patches as they are.
+    /// patches as they are (default 0: measured not to help here, `docs/results/planar.md`).
     pose_hold: f64,
     /// Learning rate of the free translations (BARF, spline; the paper's 1e-3).
     lr_translation: f64,
