@@ -26,7 +26,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::data::{RgbdError, RgbdSequence, read_replica, read_scannet, read_tum_rgbd};
+use crate::data::{
+    RgbdError, RgbdSequence, read_replica, read_scannet, read_seven_scenes, read_tum_rgbd,
+};
 use crate::map::{DENSITY_SCALE, MapConfig, NeuralMap, PixelSample};
 use crate::slam::{MappingConfig, Slam, TrackReport, TrackingConfig};
 use crate::surface::{COMPLETION_RADIUS, score_mesh};
@@ -104,7 +106,7 @@ pub struct DataConfig {
     /// Pixels cut from every side (NICE-SLAM: ScanNet 10, TUM 8).
     #[serde(default)]
     pub crop_edge: usize,
-    /// Replica's frame rate (its files have no timestamps).
+    /// The frame rate of datasets whose files have no timestamps (Replica, 7-Scenes), Hz.
     #[serde(default = "thirty")]
     pub frame_rate: f64,
     /// Keep every this many frames (a faster camera: 30 Hz with `stride = 6` is 5 Hz); 0 or 1
@@ -151,6 +153,9 @@ pub enum Source {
     Scannet,
     /// TUM RGB-D.
     Tum,
+    /// Microsoft 7-Scenes (a `seq-NN` folder or any flat folder of its frames).
+    #[serde(rename = "7scenes")]
+    SevenScenes,
 }
 
 /// The map's region: either an axis-aligned box (`box = [[x0, x1], [y0, y1], [z0, z1]]`, as
@@ -286,6 +291,18 @@ pub fn open_sequence(
         }
         Source::Scannet => read_scannet(&d.path, d.resolution, d.crop_edge)?,
         Source::Tum => read_tum_rgbd(&d.path, None, d.resolution, d.crop_edge)?,
+        Source::SevenScenes => {
+            if !d.path.is_dir() {
+                bail!(
+                    "no 7-Scenes sequence at {}: Microsoft's 7-Scenes (a scene's seq-NN folder of \
+                     frame-NNNNNN.color.png, .depth.png and .pose.txt) is downloaded from \
+                     Microsoft Research; an excerpt of redkitchen ships in ../shared/data/7scenes. \
+                     Set data.path to the sequence folder",
+                    d.path.display()
+                );
+            }
+            read_seven_scenes(&d.path, d.resolution, d.frame_rate)?
+        }
     };
     Ok(seq)
 }

@@ -57,6 +57,16 @@ impl DepthImage {
 
     /// Reads a 16-bit (or 8-bit) single-channel PNG whose values are `depth · scale`.
     pub fn load_png(path: &Path, scale: f64) -> Result<Self, RgbdError> {
+        Self::load_png_masked(path, scale, None)
+    }
+
+    /// [`DepthImage::load_png`] with the stored value `invalid` read as missing (`0`): 7-Scenes
+    /// marks pixels without a reading with 65535.
+    pub fn load_png_masked(
+        path: &Path,
+        scale: f64,
+        invalid: Option<u16>,
+    ) -> Result<Self, RgbdError> {
         let bytes = std::fs::read(path).map_err(|e| RgbdError::io(path, e))?;
         let decoded =
             ::image::ImageReader::with_format(Cursor::new(bytes), ::image::ImageFormat::Png)
@@ -78,7 +88,13 @@ impl DepthImage {
         let data = luma
             .into_raw()
             .into_iter()
-            .map(|v| v as f32 * inv)
+            .map(|v| {
+                if Some(v) == invalid {
+                    0.0
+                } else {
+                    v as f32 * inv
+                }
+            })
             .collect();
         Ok(Self {
             width: w,

@@ -16,6 +16,7 @@
 mod depth;
 mod replica;
 mod scannet;
+mod seven_scenes;
 mod tum;
 
 use std::path::{Path, PathBuf};
@@ -28,6 +29,10 @@ use nalgebra::Isometry3;
 pub use depth::DepthImage;
 pub use replica::{REPLICA_DEPTH_SCALE, REPLICA_INTRINSICS, read_replica, write_replica};
 pub use scannet::{SCANNET_DEPTH_SCALE, SCANNET_INTRINSICS, read_scannet};
+pub use seven_scenes::{
+    SEVEN_SCENES_DEPTH_SCALE, SEVEN_SCENES_INTRINSICS, SEVEN_SCENES_INVALID_DEPTH,
+    read_seven_scenes,
+};
 pub use tum::{TUM_DEPTH_SCALE, TUM_FR1_INTRINSICS, read_tum_rgbd};
 
 /// Errors from reading or writing RGB-D sequences. Every variant names the file.
@@ -179,8 +184,10 @@ pub struct RgbdSequence {
     /// Per frame, the ground-truth `world_from_camera`; `None` where the dataset has none or a
     /// non-finite one (ScanNet marks lost frames with `inf`).
     pub truth: Vec<Option<Isometry3<f64>>>,
-    /// Depth PNG units per metre (Replica 6553.5, ScanNet 1000, TUM 5000).
+    /// Depth PNG units per metre (Replica 6553.5, ScanNet 1000, TUM 5000, 7-Scenes 1000).
     pub depth_scale: f64,
+    /// A stored depth value that marks a missing reading besides 0 (7-Scenes: 65535).
+    pub invalid_depth: Option<u16>,
     /// The stored size of the depth images, which `camera` was derived from (colour of another
     /// size with the same aspect ratio, as ScanNet's, is resized to it first).
     stored: (usize, usize),
@@ -240,6 +247,7 @@ impl RgbdSequence {
             frames,
             truth,
             depth_scale,
+            invalid_depth: None,
             stored,
             resolution,
             crop_edge,
@@ -292,7 +300,8 @@ impl RgbdSequence {
     pub fn load(&self, index: usize) -> Result<RgbdFrame, RgbdError> {
         let files = &self.frames[index];
         let color = Image::load(&files.color)?;
-        let depth = DepthImage::load_png(&files.depth, self.depth_scale)?;
+        let depth =
+            DepthImage::load_png_masked(&files.depth, self.depth_scale, self.invalid_depth)?;
         // ScanNet stores colour larger than depth: colour is resized to the depth's size.
         let color = if (color.width(), color.height()) == self.stored {
             color
