@@ -70,8 +70,13 @@ made_by() {
     if [ -n "$(git status --porcelain 2>/dev/null)" ]; then
         head_commit="$head_commit, dirty"
     fi
+    # A run made by a build with uncommitted changes is marked "+dirty".
     run_commits=$(for d in "$@"; do
-        sed -n 's/^  "commit": "\([0-9a-f]\{7\}\).*/\1/p' "$d/provenance.json" 2>/dev/null
+        commit=$(sed -n 's/^  "commit": "\([0-9a-f]\{7\}\).*/\1/p' "$d/provenance.json" 2>/dev/null)
+        if grep -q '^  "dirty": true' "$d/provenance.json" 2>/dev/null; then
+            commit="$commit+dirty"
+        fi
+        echo "$commit"
     done | sort -u | tr '\n' ' ' | sed 's/ $//')
     cpu=$(sed -n 's/^model name[[:space:]]*:[[:space:]]*//p' /proc/cpuinfo 2>/dev/null | head -n 1)
     cpus=$(nproc 2>/dev/null || getconf _NPROCESSORS_ONLN 2>/dev/null || echo "?")

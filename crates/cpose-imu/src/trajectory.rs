@@ -681,9 +681,9 @@ impl Fit<'_> {
     }
 
     /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel` until the known poses are within
-    /// tolerance, the loss is on a plateau or `iterations` steps are spent ([`StopRule`]),
+    /// tolerance, `L_pose` is on a plateau or `iterations` steps are spent ([`StopRule`]),
     /// reporting the loss and the known and held-out errors and checkpointing through `unit`;
-    /// returns the mean loss of the last window and how the fit ended.
+    /// returns the mean `L_pose` of the last window and how the fit ended.
     fn run(
         &self,
         field: &mut dyn PoseField,
@@ -708,7 +708,7 @@ impl Fit<'_> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut cursor = imu_order.len();
         let mut first = 0;
-        let mut loss = f64::NAN;
+        let mut pose_loss = f64::NAN;
         unit.set_steps(iterations);
         if let Some((done, mut r)) = unit.resume() {
             r.pose_field(field)?;
@@ -723,7 +723,7 @@ impl Fit<'_> {
             }
             imu_order = order.into_iter().map(|i| i as usize).collect();
             cursor = r.u64()? as usize;
-            loss = r.f64()?;
+            pose_loss = r.f64()?;
             let state = r.f64s()?;
             convergence.set_state(state.as_slice().try_into().with_context(|| {
                 format!(
@@ -740,7 +740,7 @@ impl Fit<'_> {
             let n = self.seq.known_times.len();
             field.forward(&self.seq.known_times, Order::Pose, &mut out)?;
             cot.reset(n, Order::Pose);
-            loss = losses::pose_l2(
+            let mut loss = losses::pose_l2(
                 &out,
                 &self.known_targets,
                 self.cfg.pose_weight,
@@ -748,6 +748,9 @@ impl Fit<'_> {
                 &mut cot,
             );
             field.backward(&self.seq.known_times, &cot, &mut grad)?;
+            // The fit's own term: IMU terms on real readings keep a floor of sensor noise that
+            // would pass for a plateau while the known poses are still far off.
+            pose_loss = loss;
             if mode == ImuMode::Loose {
                 // Windows [t_k, t_k + window] from a shuffled IMU index; the gyro integrated
                 // over each supervises the rotation between its ends.
@@ -836,7 +839,7 @@ impl Fit<'_> {
                 );
             }
             steps = done;
-            if convergence.observe(loss) {
+            if convergence.observe(pose_loss) {
                 let known = self.known_errors(field)?;
                 if let Some(reason) = convergence.check(self.within_tolerance(known)) {
                     stop = reason;
@@ -850,7 +853,7 @@ impl Fit<'_> {
                     w.rng(&rng);
                     w.f64s(&imu_order.iter().map(|&i| i as f64).collect::<Vec<_>>());
                     w.u64(cursor as u64);
-                    w.f64(loss);
+                    w.f64(pose_loss);
                     w.f64s(&convergence.state());
                     Ok(())
                 })?;
@@ -879,7 +882,7 @@ impl Fit<'_> {
             self.cfg.tolerance_deg,
             self.cfg.tolerance_m
         ));
-        Ok((convergence.last_mean().unwrap_or(loss), outcome))
+        Ok((convergence.last_mean().unwrap_or(pose_loss), outcome))
     }
 }
 
