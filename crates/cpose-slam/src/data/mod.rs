@@ -13,6 +13,7 @@
 //!   would invent surfaces between the two), and the camera is scaled to the new size. Then
 //!   `crop_edge` pixels are cut from every side (ScanNet and TUM, as NICE-SLAM).
 
+mod convert;
 mod depth;
 mod replica;
 mod scannet;
@@ -26,6 +27,7 @@ use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::image::Image;
 use nalgebra::Isometry3;
 
+pub use convert::{Layout, write_sequence};
 pub use depth::DepthImage;
 pub use replica::{REPLICA_DEPTH_SCALE, REPLICA_INTRINSICS, read_replica, write_replica};
 pub use scannet::{SCANNET_DEPTH_SCALE, SCANNET_INTRINSICS, read_scannet};

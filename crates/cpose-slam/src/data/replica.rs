@@ -225,7 +225,7 @@ pub fn write_replica(
 }
 
 /// Saves `image` as an 8-bit JPEG, atomically.
-fn save_jpeg(image: &Image, path: &Path) -> Result<(), RgbdError> {
+pub(super) fn save_jpeg(image: &Image, path: &Path) -> Result<(), RgbdError> {
     let bytes: Vec<u8> = image
         .data()
         .iter()
