@@ -10,6 +10,7 @@
 //! (`cpose_slam::data::write_sequence`). Frames without timestamps get 30 Hz. The destination must
 //! be a new or empty folder.
 
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -56,7 +57,7 @@ fn main() -> ExitCode {
     };
     match seq.and_then(|seq| write_sequence(&seq, layout, &dst, frames)) {
         Ok(()) => {
-            println!("{}", dst.display());
+            let _ = writeln!(std::io::stdout(), "{}", dst.display());
             ExitCode::SUCCESS
         }
         Err(e) => {
