@@ -5,7 +5,7 @@
 #
 #   scripts/results/nerf.sh [TABLE...]
 #
-# TABLE is one of lego lego_barf grid restarts restarts_grid llff llff_colmap encoding (default:
+# TABLE is one of hold lego lego_barf grid restarts restarts_grid llff llff_colmap encoding (default:
 # all, in that order). Runs go to runs/results/nerf/TABLE/NAME (common.sh: environment); a
 # finished run is kept and an interrupted one resumed, so the script continues where it stopped.
 # The tables are printed to stdout. The grid is 13 runs of about 15 minutes each on two cores;
@@ -76,6 +76,27 @@ grid_runs() {
 }
 
 grid_metrics=init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db
+
+# The pose hold: from COLMAP's own poses on fern (a control: the poses should stay there) and
+# from the default noise on the built-in scene, without a hold, held for 10% of the steps (until
+# the grid's coarse-to-fine begins) and for 50% (until it ends).
+table_hold() {
+    dirs=
+    for hold in 0 0.1 0.5; do
+        run "hold/fern-colmap-hold$hold" "$fern" --set "$fern_data" --set 'noise.kind="none"' \
+            --set "train.pose_hold=$hold"
+        dirs="$dirs $out/hold/fern-colmap-hold$hold"
+    done
+    for hold in 0 0.5; do
+        run "hold/synthetic-hold$hold" "$synthetic" --set 'train.methods=["posenet","barf"]' \
+            --set "train.pose_hold=$hold"
+        dirs="$dirs $out/hold/synthetic-hold$hold"
+    done
+    # shellcheck disable=SC2086
+    table "Poses held while the field first fits (train.pose_hold)" \
+        init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db \
+        $dirs
+}
 
 table_lego() {
     grid_runs lego "$lego" --set "$lego_data"
@@ -176,7 +197,7 @@ table_encoding() {
         "$out/$d/f10-c2f"
 }
 
-tables=$(tables_from "lego lego_barf grid restarts restarts_grid llff llff_colmap encoding" "$@")
+tables=$(tables_from "hold lego lego_barf grid restarts restarts_grid llff llff_colmap encoding" "$@")
 for t in $tables; do
     "table_$t"
 done
