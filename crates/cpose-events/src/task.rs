@@ -691,10 +691,11 @@ fn run_method(
         rotation_warmup: train.pose_warmup,
     }
     .steps(iterations)?;
+    let trained = iterations - hold as usize;
     let schedules = PoseSchedules {
-        rotation: decay(train.posenet_lr_rotation, iterations),
-        translation: decay(train.posenet_lr_translation, iterations),
-        pose: decay(train.posenet_lr_translation, iterations),
+        rotation: decay(train.posenet_lr_rotation, trained),
+        translation: decay(train.posenet_lr_translation, trained),
+        pose: decay(train.posenet_lr_translation, trained),
         hold,
         warmup,
         rotation_warmup,

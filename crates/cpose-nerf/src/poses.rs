@@ -22,7 +22,8 @@ use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::camera::PoseGradient;
 
-/// Learning-rate schedules of a correction, by parameter kind.
+/// Learning-rate schedules of a correction, by parameter kind. The decays run over the steps
+/// after the hold: a held pose starts its schedule when the hold ends.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseSchedules {
     /// Rotation parameters (PoseNet's rotation network).
@@ -49,15 +50,15 @@ impl PoseSchedules {
     }
 
     /// The learning rate of `kind`'s parameters at iteration `it`: 0 during the hold, then the
-    /// warm-up ramp on the decaying rate.
+    /// warm-up ramp on the rate decaying from the hold's end.
     pub fn lr(&self, kind: ParamKind, it: u64) -> f64 {
         let Some(after) = it.checked_sub(self.hold) else {
             return 0.0;
         };
         match kind {
-            ParamKind::Rotation => ramp(after, self.rotation_warmup) * self.rotation.lr(it),
-            ParamKind::Translation => ramp(after, self.warmup) * self.translation.lr(it),
-            ParamKind::Pose => ramp(after, self.warmup) * self.pose.lr(it),
+            ParamKind::Rotation => ramp(after, self.rotation_warmup) * self.rotation.lr(after),
+            ParamKind::Translation => ramp(after, self.warmup) * self.translation.lr(after),
+            ParamKind::Pose => ramp(after, self.warmup) * self.pose.lr(after),
         }
     }
 }
@@ -378,8 +379,9 @@ mod tests {
         assert!(s.is_held(9) && !s.is_held(10));
         for kind in [ParamKind::Rotation, ParamKind::Translation, ParamKind::Pose] {
             assert_eq!(s.lr(kind, 9), 0.0);
-            assert!((s.lr(kind, 10) / decay.lr(10) - 0.25).abs() < 1e-12);
-            assert!((s.lr(kind, 13) / decay.lr(13) - 1.0).abs() < 1e-12);
+            // The decay starts where the hold ends.
+            assert!((s.lr(kind, 10) / decay.lr(0) - 0.25).abs() < 1e-12);
+            assert!((s.lr(kind, 13) / decay.lr(3) - 1.0).abs() < 1e-12);
         }
     }
 

@@ -411,10 +411,11 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             } else {
                 initial.clone()
             };
+            let trained = iterations - hold as usize;
             let schedules = PoseSchedules {
-                rotation: decay(train.posenet_lr_rotation, iterations),
-                translation: decay(train.posenet_lr_translation, iterations),
-                pose: decay(train.lr_pose, iterations),
+                rotation: decay(train.posenet_lr_rotation, trained),
+                translation: decay(train.posenet_lr_translation, trained),
+                pose: decay(train.lr_pose, trained),
                 hold,
                 warmup,
                 rotation_warmup,
