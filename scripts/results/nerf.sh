@@ -78,8 +78,8 @@ grid_runs() {
 grid_metrics=init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db
 
 # The pose hold: from COLMAP's own poses on fern (a control: the poses should stay there) and
-# from the default noise on the built-in scene, without a hold, held for 10% of the steps (until
-# the grid's coarse-to-fine begins) and for 50% (until it ends).
+# from the default noise on the built-in scene (RM 30° + TM 10%), without a hold, held for 10% of
+# the steps (until the grid's coarse-to-fine begins) and for 50% (until it ends).
 table_hold() {
     dirs=
     for hold in 0 0.1 0.5; do
@@ -87,7 +87,7 @@ table_hold() {
             --set "train.pose_hold=$hold"
         dirs="$dirs $out/hold/fern-colmap-hold$hold"
     done
-    for hold in 0 0.5; do
+    for hold in 0 0.1 0.5; do
         run "hold/synthetic-hold$hold" "$synthetic" --set 'train.methods=["posenet","barf"]' \
             --set "train.pose_hold=$hold"
         dirs="$dirs $out/hold/synthetic-hold$hold"
