@@ -890,6 +890,10 @@ impl PoseModel for RelativeImu {
         self.tracker.step(grad_q, grad_t)
     }
 
+    fn keep_best(&mut self) {
+        self.tracker.keep_best();
+    }
+
     fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
         self.tracker.finish(index, time, pose)
     }

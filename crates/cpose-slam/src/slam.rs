@@ -306,6 +306,7 @@ impl Slam {
             }
             if loss < best.0 {
                 best = (loss, body, self.map.depth_error());
+                model.keep_best();
             }
             let (gq, gt) = self.pose_grads[0]
                 .to_body(&mount)

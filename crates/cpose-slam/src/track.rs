@@ -9,8 +9,8 @@
 //!   camera (`world`), or the previous camera perturbed by a random transform (`random`). The
 //!   network's weights are what tracking optimises, so it starts every frame from its own
 //!   prediction `PN(t_i)`. The best relative pose of every tracked frame is kept, and after each
-//!   frame PoseNet is re-fitted on that list (a batch of earlier frames plus the newest), so it
-//!   stays a consistent function of time. Two hooks add terms of other sensors to a frame's
+//!   frame PoseNet goes back to the weights of that best candidate and is re-fitted on the list
+//!   (a batch of earlier frames plus the newest), so it stays a consistent function of time. Two hooks add terms of other sensors to a frame's
 //!   objective: on the network's relative pose at the frame ([`RelativePoseTerm`], e.g. a
 //!   measured motion since the previous frame) and on the network itself ([`NetworkObjective`],
 //!   e.g. on its time derivatives); `cpose-imu` implements both.
@@ -45,6 +45,9 @@ pub trait PoseModel: Send {
     fn pose(&self) -> Isometry3<f64>;
     /// One optimiser step from the loss gradient at [`PoseModel::pose`].
     fn step(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()>;
+    /// The current pose is the best candidate of the frame so far: a model whose parameters
+    /// produced it keeps them, to end the frame from them rather than from its last step.
+    fn keep_best(&mut self) {}
     /// Ends frame `index` with its chosen pose (the best-loss candidate).
     fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()>;
     /// Writes what a resumed run needs to continue exactly (nothing for a per-frame model).
@@ -218,6 +221,8 @@ pub struct PoseNetTracker {
     time: f64,
     /// `(t_j, T_ref_j⁻¹ T_j)` of every tracked frame.
     memory: Vec<(f64, Isometry3<f64>)>,
+    /// The weights of the frame's best candidate so far (empty: none kept yet).
+    best: Vec<f32>,
     seed: u64,
     /// Drawn afresh for each frame from `seed` and its index (resumable runs).
     rng: ChaCha8Rng,
@@ -279,6 +284,7 @@ impl PoseNetTracker {
             current_rel: Isometry3::identity(),
             time: 0.0,
             memory: Vec::new(),
+            best: Vec::new(),
             seed,
             rng: ChaCha8Rng::seed_from_u64(seed),
             next_relative_term: None,
@@ -433,9 +439,14 @@ impl PoseModel for PoseNetTracker {
         self.step_relative(&gq, &gt)
     }
 
+    fn keep_best(&mut self) {
+        self.keep_best_weights();
+    }
+
     fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
         self.objective = None;
         self.relative_term = None;
+        self.restore_best()?;
         let rel = self.current_ref.inverse() * pose;
         self.memorise(time, rel)
     }
@@ -479,6 +490,24 @@ impl PoseNetTracker {
         if self.config.fresh_optimizer {
             self.adam.reset();
         }
+        self.best.clear();
+    }
+
+    /// Keeps the current weights as the frame's best candidate's.
+    fn keep_best_weights(&mut self) {
+        self.best.clear();
+        self.best
+            .extend_from_slice(&cpose_core::pose_field::params_to_vec(self.net.as_ref()));
+    }
+
+    /// Goes back to the weights of the frame's best candidate, if one was kept.
+    fn restore_best(&mut self) -> anyhow::Result<()> {
+        if !self.best.is_empty() {
+            let best = std::mem::take(&mut self.best);
+            self.restore(&best)?;
+            self.evaluate()?;
+        }
+        Ok(())
     }
 
     /// The network's parameters, flat.
@@ -734,7 +763,14 @@ impl PoseModel for IntrinsicTracker {
         Ok(())
     }
 
+    fn keep_best(&mut self) {
+        self.origin.keep_best_weights();
+        self.motion.keep_best_weights();
+    }
+
     fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
+        self.origin.restore_best()?;
+        self.motion.restore_best()?;
         let rel = self.prev.inverse() * pose;
         // Split the chosen relative pose at the current intrinsic transform.
         let o = self.origin.current_rel;
@@ -1000,6 +1036,41 @@ mod tests {
                 "param {k}: {a} vs {numeric}"
             );
         }
+    }
+
+    /// A frame ends from the weights of its best candidate, not from its last step: without
+    /// re-fitting, the network then gives the best candidate's pose again.
+    #[test]
+    fn a_frame_ends_from_its_best_candidates_weights() {
+        let range = TimeRange::new(0.0, 1.0).unwrap();
+        let config = PoseNetTrackConfig {
+            refit_steps: 0,
+            network: PoseNetConfig {
+                depth: 3,
+                width: 16,
+                skip_layer: 0,
+                ..PoseNetConfig::default()
+            },
+            ..PoseNetTrackConfig::default()
+        };
+        let mut tracker = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
+        let prev = Isometry3::translation(0.1, 0.0, 0.0);
+        let best = tracker.begin(1, 0.5, &[prev]).unwrap();
+        tracker.keep_best();
+        for _ in 0..5 {
+            tracker
+                .step(
+                    &Quaternion::new(0.0, 0.3, -0.2, 0.1),
+                    &Vector3::new(1.0, -2.0, 0.5),
+                )
+                .unwrap();
+        }
+        let last = tracker.pose();
+        assert!((last.translation.vector - best.translation.vector).norm() > 1e-4);
+        tracker.finish(1, 0.5, &best).unwrap();
+        let now = tracker.pose();
+        assert!((now.translation.vector - best.translation.vector).norm() < 1e-9);
+        assert!(now.rotation.angle_to(&best.rotation) < 1e-9);
     }
 
     #[test]
