@@ -3,7 +3,7 @@
 //!
 //! A radiance field is trained from images whose poses are wrong, and the poses are refined
 //! jointly as a correction of the initial ones, `world_from_cam_i = C(t_i) ∘ init_i`
-//! ([`poses`]). The methods differ only in `C`: PoseNet on time (`posenet`), BARF's free se(3)
+//! ([`crate::poses`]). The methods differ only in `C`: PoseNet on time (`posenet`), BARF's free se(3)
 //! per frame (`barf`), a cubic B-spline of control poses (`spline`), or no correction at all —
 //! `true_poses` trains with the ground truth (the reference for PSNR) and `fixed` with the
 //! initial poses. Everything else is shared: field, sampling, rays and seeds.
@@ -22,7 +22,7 @@
 //!
 //! The field's region (and, for bounded scenes, the sphere rays are clipped to) is the scene's
 //! bounding ball widened by the largest shift the initial poses give the scene
-//! ([`SceneBounds::widened_for`]), the same for every method. Without it a camera shifted by
+//! ([`crate::field3d::SceneBounds::widened_for`]), the same for every method. Without it a camera shifted by
 //! more than the scene's radius sees the object where the field cannot hold it: at 60° / 20%
 //! noise even the field trained on the fixed initial poses stayed at a blank 11 dB.
 //!
