@@ -6,7 +6,7 @@
 #
 #   scripts/results/slam.sh [TABLE...]
 #
-# TABLE is methods, budget or intrinsic (default: all three). Runs go to
+# TABLE is methods, network, rates, redkitchen, budget or intrinsic (default: all six). Runs go to
 # runs/results/slam/NAME (common.sh: environment); a finished run is kept and an interrupted one
 # resumed. The tables are printed to stdout. The rooms are generated on first use into
 # data/synthetic_room and data/synthetic_room_fr1xyz.
@@ -24,8 +24,44 @@ table_methods() {
     run fr1xyz "$config" --set "$fr1xyz_motion" --set "$fr1xyz_room"
     mesh=mesh_accuracy_cm,mesh_completion
     table "Tracking methods (configs/synthetic_room.toml)" \
-        "ate_rmse_cm,ate_max_cm,first_lost,lost_frames,$mesh,dof_motion,fps" \
+        "ate_rmse_cm,ate_max_cm,drift_rmse_cm,first_lost,lost_frames,$mesh,dof_motion,fps" \
         "$out/walk" "$out/fr1xyz"
+}
+
+table_network() {
+    # The paper's tracking PoseNet (8×256, the default; in `methods`) against 4×128.
+    small='posenet.network.depth=4'
+    run walk-4x128 "$config" --set 'slam.methods=["prev"]' --set "$small" \
+        --set posenet.network.width=128 --set posenet.network.skip_layer=2
+    run fr1xyz-4x128 "$config" --set 'slam.methods=["prev"]' --set "$fr1xyz_motion" \
+        --set "$fr1xyz_room" --set "$small" --set posenet.network.width=128 \
+        --set posenet.network.skip_layer=2
+    table "The tracking PoseNet at 4×128 (prev; 8×256 is in the methods table)" \
+        ate_rmse_cm,ate_max_cm,first_lost,fps "$out/walk-4x128" "$out/fr1xyz-4x128"
+}
+
+table_rates() {
+    # PoseNet's own rates (prev, the first 200 frames of the walk): translation × rotation.
+    dirs=
+    for t in 5e-4 1e-3 2e-3; do
+        for r in 2.5e-4 5e-4 1e-3; do
+            run "rates/walk200-t$t-r$r" "$config" --set 'slam.methods=["prev"]' \
+                --set data.frames=200 --set "posenet.lr_translation=$t" \
+                --set "posenet.lr_rotation=$r"
+            dirs="$dirs $out/rates/walk200-t$t-r$r"
+        done
+    done
+    # shellcheck disable=SC2086
+    table "PoseNet's learning rates (prev, first 200 frames of the walk; lr_translation, lr_rotation)" \
+        ate_rmse_cm,ate_max_cm,first_lost $dirs
+}
+
+table_redkitchen() {
+    run redkitchen configs/7scenes_redkitchen.toml \
+        --set "data.path=\"$data/7scenes/redkitchen_0000_0499\""
+    table "Real Kinect frames: 7-Scenes redkitchen 0–499 at 320×240 (configs/7scenes_redkitchen.toml)" \
+        ate_rmse_cm,drift_rmse_cm,rpe_trans_rmse_cm,rpe_rot_rmse_deg,first_lost,mesh_accuracy_cm,mesh_completion,fps \
+        "$out/redkitchen"
 }
 
 table_budget() {
@@ -54,7 +90,7 @@ table_intrinsic() {
         "$out/fr1xyz-product"
 }
 
-tables=$(tables_from "methods budget intrinsic" "$@")
+tables=$(tables_from "methods network rates redkitchen budget intrinsic" "$@")
 for t in $tables; do
     "table_$t"
 done

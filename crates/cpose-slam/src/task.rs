@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use cpose_core::TimeRange;
-use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, write_tum};
+use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, rpe_report, write_tum};
 use cpose_core::geometry::rotation_angle_between;
 use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
@@ -252,6 +252,12 @@ struct MethodResult {
     ate_max_cm: Option<f64>,
     /// `"se3"`, or `"none"` where SE(3) alignment was degenerate.
     ate_alignment: Option<&'static str>,
+    /// RMSE of the position error without alignment: the drift from the true first pose, which
+    /// every method starts from.
+    drift_rmse_cm: Option<f64>,
+    /// Relative pose error between consecutive tracked frames (`cpose eval rpe`, delta 1 frame).
+    rpe_trans_rmse_cm: Option<f64>,
+    rpe_rot_rmse_deg: Option<f64>,
     frames: usize,
     lost_frames: usize,
     first_lost: Option<usize>,
@@ -595,11 +601,12 @@ pub fn run_methods(
                         100.0 * (t.translation.vector - slam.estimates[i].translation.vector).norm()
                     });
                     let fps = (done - first) as f64 / session.elapsed().as_secs_f64();
-                    let loss = report.as_ref().map_or(f64::NAN, |r| r.loss);
-                    unit.report(
-                        done,
-                        &[("loss", loss), ("pos_err_cm", err_cm), ("fps", fps)],
-                    );
+                    // The first frame is not tracked: no loss to report.
+                    let mut live = vec![("pos_err_cm", err_cm), ("fps", fps)];
+                    if let Some(r) = &report {
+                        live.insert(0, ("loss", r.loss));
+                    }
+                    unit.report(done, &live);
                 }
                 if done < n && unit.checkpoint_due() {
                     // The rows first: a kill between the two writes then loses none of the
@@ -646,7 +653,9 @@ pub fn run_methods(
                     if let Err(e) = drawn {
                         unit.log(format_args!("no trajectory plot: {e}"));
                     }
-                    Some((report, alignment))
+                    let drift = ate(gt, &est, Alignment::None, 1e-6)?;
+                    let rpe = rpe_report(gt, &est, 1e-6)?;
+                    Some((report, alignment, drift, rpe))
                 }
                 None => {
                     unit.log("no ground truth, no ATE");
@@ -685,12 +694,15 @@ pub fn run_methods(
                     ))
                 ));
             }
-            let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, _)| 100.0 * f(r));
+            let cm = |f: fn(&AteReport) -> f64| scored.as_ref().map(|(r, ..)| 100.0 * f(r));
             let result = MethodResult {
                 ate_rmse_cm: cm(|r| r.rmse_m),
                 ate_mean_cm: cm(|r| r.mean_m),
                 ate_max_cm: cm(|r| r.max_m),
-                ate_alignment: scored.as_ref().map(|(_, a)| a.as_str()),
+                ate_alignment: scored.as_ref().map(|(_, a, ..)| a.as_str()),
+                drift_rmse_cm: scored.as_ref().map(|(_, _, d, _)| 100.0 * d.rmse_m),
+                rpe_trans_rmse_cm: scored.as_ref().map(|(.., r)| 100.0 * r.trans_rmse_m),
+                rpe_rot_rmse_deg: scored.as_ref().map(|(.., r)| r.rot_rmse_deg),
                 frames: n,
                 lost_frames: lost.len(),
                 first_lost: lost.first().copied(),
