@@ -27,7 +27,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use cpose_core::Config;
-use cpose_core::eval::{self, Alignment};
+use cpose_core::eval::{self, Alignment, RpeDelta, Trajectory, TrajectoryFormat};
 use cpose_core::provenance::{Build, Recorder, Session};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{RunDir, RunDirOptions};
@@ -72,6 +72,77 @@ enum Command {
     Eval(EvalCommand),
     /// Print the metrics of run folders side by side as a Markdown table.
     Table(TableArgs),
+    /// Convert a trajectory file between the TUM, EuRoC csv and KITTI formats.
+    Convert(ConvertArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct ConvertArgs {
+    /// The trajectory to read.
+    input: PathBuf,
+    /// The file to write (never replaced without --force).
+    output: PathBuf,
+    /// Format of INPUT: tum, euroc or kitti (default: detected).
+    #[arg(long, value_name = "FORMAT")]
+    from: Option<TrajectoryFormat>,
+    /// Format of OUTPUT (default: euroc for a `.csv` name, else tum).
+    #[arg(long, value_name = "FORMAT")]
+    to: Option<TrajectoryFormat>,
+    /// Times file of a KITTI INPUT (one time in seconds per line, KITTI's times.txt).
+    #[arg(long, value_name = "FILE")]
+    times: Option<PathBuf>,
+    /// Where a KITTI OUTPUT's times go (KITTI pose files have none; without it they are lost).
+    #[arg(long, value_name = "FILE")]
+    out_times: Option<PathBuf>,
+    /// Replace OUTPUT (and --out-times) if they exist.
+    #[arg(long)]
+    force: bool,
+}
+
+/// How the two trajectories of `cpose eval` are read.
+#[derive(Debug, clap::Args)]
+struct TrajectoryInputs {
+    /// Reference trajectory: TUM (`timestamp tx ty tz qx qy qz qw`), EuRoC csv or KITTI.
+    gt: PathBuf,
+    /// Estimated trajectory, in any of the same formats.
+    est: PathBuf,
+    /// Format of both files: tum, euroc or kitti (default: detected for each file).
+    #[arg(long, value_name = "FORMAT")]
+    format: Option<TrajectoryFormat>,
+    /// Times file of a KITTI reference (one time in seconds per line).
+    #[arg(long, value_name = "FILE")]
+    gt_times: Option<PathBuf>,
+    /// Times file of a KITTI estimate.
+    #[arg(long, value_name = "FILE")]
+    est_times: Option<PathBuf>,
+    /// Largest timestamp difference of an associated pose pair, seconds (evo's default 0.01).
+    #[arg(long, default_value_t = 0.01, value_name = "SECS")]
+    max_diff: f64,
+    /// Print the full report as JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+impl TrajectoryInputs {
+    /// Both trajectories, read; errors name the file.
+    fn read(&self) -> Result<(Trajectory, Trajectory), Failure> {
+        let read = |path: &Path, times: &Option<PathBuf>| {
+            eval::read_trajectory(path, self.format, times.as_deref())
+                .map_err(|e| Failure::Usage(e.into()))
+        };
+        Ok((
+            read(&self.gt, &self.gt_times)?,
+            read(&self.est, &self.est_times)?,
+        ))
+    }
+
+    fn context(&self) -> String {
+        format!(
+            "comparing {} with {}",
+            self.est.display(),
+            self.gt.display()
+        )
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -88,23 +159,32 @@ struct TableArgs {
 enum EvalCommand {
     /// Absolute trajectory error of the translation part, as `evo_ape tum GT EST [-a|-as]`.
     Ate(AteArgs),
+    /// Relative pose error, as `evo_rpe tum GT EST --delta D --delta_unit f|m [-a|-as]`.
+    Rpe(RpeArgs),
 }
 
 #[derive(Debug, clap::Args)]
 struct AteArgs {
-    /// Reference trajectory (TUM format: `timestamp tx ty tz qx qy qz qw`).
-    gt: PathBuf,
-    /// Estimated trajectory (TUM format).
-    est: PathBuf,
+    #[command(flatten)]
+    inputs: TrajectoryInputs,
     /// Alignment of the estimate before the error: `se3` (evo `-a`), `sim3` (evo `-as`) or `none`.
     #[arg(long, default_value = "se3")]
     align: Alignment,
-    /// Largest timestamp difference of an associated pose pair, seconds (evo's default 0.01).
-    #[arg(long, default_value_t = 0.01, value_name = "SECS")]
-    max_diff: f64,
-    /// Print the full report as JSON instead of text.
-    #[arg(long)]
-    json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+struct RpeArgs {
+    #[command(flatten)]
+    inputs: TrajectoryInputs,
+    /// The step between the two poses of a pair, in --delta-unit.
+    #[arg(long, default_value_t = 1.0, value_name = "D")]
+    delta: f64,
+    /// The unit of --delta: `f` (frames) or `m` (metres travelled), as evo's `--delta_unit`.
+    #[arg(long, default_value = "f", value_parser = ["f", "m"])]
+    delta_unit: String,
+    /// Alignment of the estimate first: `none` (evo's default), `se3` or `sim3`.
+    #[arg(long, default_value = "none")]
+    align: Alignment,
 }
 
 #[derive(Debug, clap::Args)]
@@ -162,6 +242,8 @@ where
         Command::List => list(),
         Command::Run(args) => run(&args, command_line),
         Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
+        Command::Eval(EvalCommand::Rpe(args)) => eval_rpe(&args),
+        Command::Convert(args) => convert(&args),
         Command::Table(args) => table::metrics_table(&args.runs, &args.metrics)
             .map(|text| {
                 let _ = std::io::stdout().lock().write_all(text.as_bytes());
@@ -342,26 +424,18 @@ fn run_task(
 
 /// `cpose eval ate GT EST`: association, alignment and translation-error statistics (metres).
 fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
-    let usage = |e: anyhow::Error| Failure::Usage(e);
-    let gt = eval::read_tum(&args.gt).map_err(|e| usage(e.into()))?;
-    let est = eval::read_tum(&args.est).map_err(|e| usage(e.into()))?;
-    let report = eval::ate(&gt, &est, args.align, args.max_diff)
-        .with_context(|| {
-            format!(
-                "comparing {} with {}",
-                args.est.display(),
-                args.gt.display()
-            )
-        })
+    let (gt, est) = args.inputs.read()?;
+    let report = eval::ate(&gt, &est, args.align, args.inputs.max_diff)
+        .with_context(|| args.inputs.context())
         .map_err(Failure::Run)?;
-    let text = if args.json {
+    let text = if args.inputs.json {
         serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
     } else {
         format!(
             "matched {} pose pairs (max time difference {} s), alignment {}{}\n\
              rmse   {:.12} m\nmean   {:.12} m\nmedian {:.12} m\nstd    {:.12} m\nmin    {:.12} m\nmax    {:.12} m\n",
             report.num_matched,
-            args.max_diff,
+            args.inputs.max_diff,
             report.alignment,
             if report.alignment == Alignment::Sim3 {
                 format!(" (scale {:.9})", report.transform.scale)
@@ -377,5 +451,95 @@ fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
         )
     };
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    Ok(())
+}
+
+/// `cpose eval rpe`: [`eval::rpe_report`] of two trajectory files.
+fn eval_rpe(args: &RpeArgs) -> Result<(), Failure> {
+    let delta = match args.delta_unit.as_str() {
+        "m" => RpeDelta::Metres(args.delta),
+        _ if args.delta >= 1.0 && args.delta.fract() == 0.0 => {
+            RpeDelta::Frames(args.delta as usize)
+        }
+        _ => {
+            return Err(Failure::Usage(anyhow::anyhow!(
+                "--delta {} with --delta-unit f: expected a whole number of frames of at least 1",
+                args.delta
+            )));
+        }
+    };
+    let (gt, est) = args.inputs.read()?;
+    let report = eval::rpe_report(&gt, &est, args.inputs.max_diff, delta, args.align)
+        .with_context(|| args.inputs.context())
+        .map_err(Failure::Run)?;
+    let text = if args.inputs.json {
+        serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
+    } else {
+        format!(
+            "matched {} poses (max time difference {} s), {} pairs {} {} apart, alignment {}\n\
+             translation  rmse {:.12} m  mean {:.12} m  median {:.12} m  max {:.12} m\n\
+             rotation     rmse {:.12}°  mean {:.12}°  median {:.12}°  max {:.12}°\n",
+            report.num_matched,
+            args.inputs.max_diff,
+            report.num_pairs,
+            args.delta,
+            if args.delta_unit == "m" {
+                "m"
+            } else {
+                "frames"
+            },
+            report.alignment,
+            report.trans_rmse_m,
+            report.trans_mean_m,
+            report.trans_median_m,
+            report.trans_max_m,
+            report.rot_rmse_deg,
+            report.rot_mean_deg,
+            report.rot_median_deg,
+            report.rot_max_deg,
+        )
+    };
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    Ok(())
+}
+
+/// `cpose convert`: reads a trajectory in one format and writes it in another, never over an
+/// existing file unless `--force`.
+fn convert(args: &ConvertArgs) -> Result<(), Failure> {
+    let usage = |e: anyhow::Error| Failure::Usage(e);
+    let to = args.to.unwrap_or_else(|| {
+        let csv = args
+            .output
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+        if csv {
+            TrajectoryFormat::Euroc
+        } else {
+            TrajectoryFormat::Tum
+        }
+    });
+    let targets = std::iter::once(&args.output).chain(args.out_times.iter());
+    for target in targets {
+        if !args.force && target.exists() {
+            return Err(usage(anyhow::anyhow!(
+                "{} exists; give --force to replace it",
+                target.display()
+            )));
+        }
+    }
+    let trajectory = eval::read_trajectory(&args.input, args.from, args.times.as_deref())
+        .map_err(|e| usage(e.into()))?;
+    eval::write_trajectory(&args.output, &trajectory, to, args.out_times.as_deref())
+        .map_err(|e| Failure::Run(e.into()))?;
+    let lost = if to == TrajectoryFormat::Kitti && args.out_times.is_none() {
+        " (KITTI keeps no timestamps: give --out-times FILE to keep them)"
+    } else {
+        ""
+    };
+    eprintln!(
+        "cpose: wrote {} poses to {} as {to}{lost}",
+        trajectory.len(),
+        args.output.display()
+    );
     Ok(())
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use cpose_core::eval::{self, Alignment};
+use cpose_core::eval::{self, Alignment, RpeDelta};
 
 use crate::util::{method_metrics, temp_dir, unit_file, write};
 
@@ -156,6 +156,131 @@ fn eval_ate_rejects_malformed_trajectories_with_file_and_line() {
     );
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("missing.txt"));
+}
+
+#[test]
+fn eval_rpe_prints_the_library_report_in_frames_and_metres() {
+    let Some(dir) = tum_dir() else {
+        eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
+        return;
+    };
+    let (gt, est) = (
+        dir.join("groundtruth.txt"),
+        dir.join("rgbdslam_estimate.txt"),
+    );
+    let gt_traj = eval::read_tum(&gt).unwrap();
+    let est_traj = eval::read_tum(&est).unwrap();
+    for (delta, unit, expected) in [
+        ("3", "f", RpeDelta::Frames(3)),
+        ("0.2", "m", RpeDelta::Metres(0.2)),
+    ] {
+        let out = cpose_in(
+            &workspace_root(),
+            &[
+                "eval",
+                "rpe",
+                gt.to_str().unwrap(),
+                est.to_str().unwrap(),
+                "--delta",
+                delta,
+                "--delta-unit",
+                unit,
+                "--json",
+            ],
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let ours = eval::rpe_report(&gt_traj, &est_traj, 0.01, expected, Alignment::None).unwrap();
+        assert_eq!(report["trans_rmse_m"].as_f64().unwrap(), ours.trans_rmse_m);
+        assert_eq!(report["rot_rmse_deg"].as_f64().unwrap(), ours.rot_rmse_deg);
+        assert_eq!(
+            report["num_pairs"].as_u64().unwrap() as usize,
+            ours.num_pairs
+        );
+    }
+    // Half a frame is no delta.
+    let out = cpose_in(
+        &workspace_root(),
+        &[
+            "eval",
+            "rpe",
+            gt.to_str().unwrap(),
+            est.to_str().unwrap(),
+            "--delta",
+            "0.5",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("whole number of frames"));
+}
+
+#[test]
+fn convert_round_trips_every_format_and_never_replaces_a_file_unasked() {
+    let dir = temp_dir("convert");
+    let tum = write(
+        &dir,
+        "in.txt",
+        "1.5 0 0 0 0 0 0 1\n2.0 1 0.5 0 0 0 0.6 0.8\n3.25 1 1 2 0.5 0.5 0.5 0.5\n",
+    );
+    let original = eval::read_tum(&tum).unwrap();
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_owned();
+    let steps: [&[&str]; 3] = [
+        &["convert", &path("in.txt"), &path("a.csv")],
+        &[
+            "convert",
+            &path("a.csv"),
+            &path("b.kitti"),
+            "--to",
+            "kitti",
+            "--out-times",
+            &path("b.times"),
+        ],
+        &[
+            "convert",
+            &path("b.kitti"),
+            &path("c.txt"),
+            "--times",
+            &path("b.times"),
+        ],
+    ];
+    for args in steps {
+        let out = cpose_in(&dir, args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let euroc = std::fs::read_to_string(dir.join("a.csv")).unwrap();
+    assert!(
+        euroc.starts_with("#timestamp [ns]")
+            && euroc.contains("\n2000000000,1,0.5,0,0.8,0,0,0.6\n"),
+        "{euroc}"
+    );
+    let back = eval::read_tum(dir.join("c.txt")).unwrap();
+    assert_eq!(back.timestamps_secs(), original.timestamps_secs());
+    for (a, b) in back.poses().iter().zip(original.poses()) {
+        assert!((a.translation.vector - b.translation.vector).norm() < 1e-12);
+        assert!(a.rotation.angle_to(&b.rotation) < 1e-9);
+    }
+    // An existing output is kept unless --force; a KITTI input without its times is refused.
+    let before = std::fs::read(dir.join("c.txt")).unwrap();
+    let out = cpose_in(&dir, &["convert", &path("a.csv"), &path("c.txt")]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--force"));
+    assert_eq!(std::fs::read(dir.join("c.txt")).unwrap(), before);
+    let out = cpose_in(&dir, &["convert", &path("b.kitti"), &path("d.txt")]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("times file") && err.contains("b.kitti") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.join("d.txt").exists());
 }
 
 /// A run folder records which build, command line and machine made it (`provenance.json`), and

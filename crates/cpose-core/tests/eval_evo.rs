@@ -14,8 +14,9 @@ use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use cpose_core::eval::{
-    Alignment, DEFAULT_MAX_DIFF_SECS, ReflectionFix, Trajectory, align_poses, ape_rotation_angle,
-    associate, barf_pose_errors, error_stats, read_tum, rpe, write_tum,
+    Alignment, DEFAULT_MAX_DIFF_SECS, ReflectionFix, RpeDelta, Trajectory, TrajectoryFormat,
+    align_poses, ape_rotation_angle, associate, barf_pose_errors, error_stats, read_trajectory,
+    read_tum, rpe, rpe_report, write_trajectory, write_tum,
 };
 
 /// The fr1_xyz files `(ground truth, estimate)`, or `None` (after saying so) when the shared data
@@ -226,7 +227,14 @@ fn eval_rotation_ape_and_rpe_match_evo_on_tum_fr1_xyz() {
         .map(|a| a.to_degrees())
         .collect();
     let ours = error_stats(&deg).unwrap();
-    let report = cpose_core::eval::rpe_report(&gt, &est, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let report = cpose_core::eval::rpe_report(
+        &gt,
+        &est,
+        DEFAULT_MAX_DIFF_SECS,
+        RpeDelta::Frames(1),
+        Alignment::None,
+    )
+    .unwrap();
     assert_eq!(report.rot_rmse_deg, ours.rmse);
     assert_eq!(report.num_pairs, rel.pairs.len());
     println!(
@@ -237,6 +245,171 @@ fn eval_rotation_ape_and_rpe_match_evo_on_tum_fr1_xyz() {
     );
     assert_rel(ours.rmse, stat(&stats, "rmse"), "RPE angle rmse");
     assert_rel(ours.mean, stat(&stats, "mean"), "RPE angle mean");
+}
+
+#[test]
+fn rpe_in_frames_and_metres_with_alignment_matches_evo_rpe_on_tum_fr1_xyz() {
+    let test = "rpe_in_frames_and_metres_with_alignment_matches_evo_rpe_on_tum_fr1_xyz";
+    let Some((gt_path, est_path)) = tum_files(test) else {
+        return;
+    };
+    let (gt, est) = load(&gt_path, &est_path);
+    let (gt_s, est_s) = (gt_path.to_str().unwrap(), est_path.to_str().unwrap());
+    for (delta, unit, value, align, flag) in [
+        (RpeDelta::Frames(5), "f", "5", Alignment::None, None),
+        (
+            RpeDelta::Metres(0.1),
+            "m",
+            "0.1",
+            Alignment::Se3,
+            Some("-a"),
+        ),
+        (
+            RpeDelta::Metres(0.25),
+            "m",
+            "0.25",
+            Alignment::Sim3,
+            Some("-as"),
+        ),
+    ] {
+        let ours = rpe_report(&gt, &est, DEFAULT_MAX_DIFF_SECS, delta, align).unwrap();
+        for (relation, rmse, mean) in [
+            ("trans_part", ours.trans_rmse_m, ours.trans_mean_m),
+            ("angle_deg", ours.rot_rmse_deg, ours.rot_mean_deg),
+        ] {
+            let mut args = vec![
+                "tum",
+                gt_s,
+                est_s,
+                "--delta",
+                value,
+                "--delta_unit",
+                unit,
+                "-r",
+                relation,
+            ];
+            args.extend(flag);
+            let Some(stats) = run_evo(test, "evo_rpe", &args) else {
+                return;
+            };
+            println!(
+                "RPE {relation}, delta {value} {unit}, {align}: evo rmse {:.15}, ours {rmse:.15} ({} pairs)",
+                stat(&stats, "rmse"),
+                ours.num_pairs
+            );
+            assert_rel(rmse, stat(&stats, "rmse"), "RPE rmse");
+            assert_rel(mean, stat(&stats, "mean"), "RPE mean");
+        }
+    }
+}
+
+#[test]
+fn euroc_and_kitti_files_give_evo_ape_s_numbers() {
+    let test = "euroc_and_kitti_files_give_evo_ape_s_numbers";
+    let Some((gt_path, est_path)) = tum_files(test) else {
+        return;
+    };
+    let (gt, est) = load(&gt_path, &est_path);
+    // EuRoC csv: evo's `evo_ape euroc` takes the ground truth as EuRoC csv and the estimate as
+    // TUM. The real V1_02 ground truth (17 columns, ns timestamps, w-first quaternions), against
+    // a perturbed copy of every 10th pose; and the same ground truth as cpose writes it.
+    let data = cpose_core::fs::shared_data_dir().unwrap();
+    let euroc_gt = data.join("euroc/V1_02_excerpt/mav0/state_groundtruth_estimate0/data.csv");
+    let real = read_trajectory(&euroc_gt, None, None).unwrap();
+    let (times, poses): (Vec<f64>, Vec<_>) = real
+        .iter()
+        .step_by(10)
+        .enumerate()
+        .map(|(i, (t, p))| {
+            let k = i as f64;
+            let shift = nalgebra::Vector3::new(0.01 * k.sin(), 0.02 * (0.3 * k).cos(), 0.005);
+            let turn = nalgebra::UnitQuaternion::from_scaled_axis(shift * 0.5);
+            let pose = nalgebra::Isometry3::from_parts(
+                (p.translation.vector + shift).into(),
+                p.rotation * turn,
+            );
+            (t + 0.001, pose)
+        })
+        .unzip();
+    let est_tum = temp_path("est.txt");
+    let estimate = Trajectory::new(times, poses).unwrap();
+    write_tum(&est_tum, &estimate).unwrap();
+    let written_gt = temp_path("gt.csv");
+    write_trajectory(&written_gt, &real, TrajectoryFormat::Euroc, None).unwrap();
+    for gt_csv in [euroc_gt.as_path(), written_gt.as_path()] {
+        let gt_back = read_trajectory(gt_csv, None, None).unwrap();
+        let ours =
+            cpose_core::eval::ate(&gt_back, &estimate, Alignment::Se3, DEFAULT_MAX_DIFF_SECS)
+                .unwrap();
+        let args = [
+            "euroc",
+            gt_csv.to_str().unwrap(),
+            est_tum.to_str().unwrap(),
+            "-a",
+        ];
+        let Some(stats) = run_evo(test, "evo_ape", &args) else {
+            return;
+        };
+        println!(
+            "EuRoC csv {}: evo ATE {:.15} m, ours {:.15} m ({} pairs)",
+            gt_csv.display(),
+            stat(&stats, "rmse"),
+            ours.rmse_m,
+            ours.num_matched
+        );
+        assert_rel(ours.rmse_m, stat(&stats, "rmse"), "EuRoC ATE rmse");
+    }
+    for p in [&est_tum, &written_gt] {
+        std::fs::remove_file(p).unwrap();
+    }
+
+    // KITTI has no timestamps, so evo pairs by index: the associated poses are written as two
+    // KITTI files of equal length, read back by cpose with a times file.
+    let association = associate(&gt, &est, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let (reference, estimate) = association.poses(&gt, &est);
+    let times: Vec<f64> = association
+        .pairs
+        .iter()
+        .map(|&(i, _)| gt.timestamps_secs()[i])
+        .collect();
+    let (ref_txt, est_txt, times_txt) = (
+        temp_path("ref.txt"),
+        temp_path("est.txt"),
+        temp_path("times.txt"),
+    );
+    let reference = Trajectory::new(times.clone(), reference).unwrap();
+    let estimate = Trajectory::new(times, estimate).unwrap();
+    write_trajectory(
+        &ref_txt,
+        &reference,
+        TrajectoryFormat::Kitti,
+        Some(&times_txt),
+    )
+    .unwrap();
+    write_trajectory(&est_txt, &estimate, TrajectoryFormat::Kitti, None).unwrap();
+    let ref_back = read_trajectory(&ref_txt, None, Some(&times_txt)).unwrap();
+    let est_back = read_trajectory(&est_txt, None, Some(&times_txt)).unwrap();
+    let ours = cpose_core::eval::ate(&ref_back, &est_back, Alignment::Se3, 1e-9).unwrap();
+    let evo = run_evo(
+        test,
+        "evo_ape",
+        &[
+            "kitti",
+            ref_txt.to_str().unwrap(),
+            est_txt.to_str().unwrap(),
+            "-a",
+        ],
+    );
+    for p in [&ref_txt, &est_txt, &times_txt] {
+        std::fs::remove_file(p).unwrap();
+    }
+    let Some(stats) = evo else { return };
+    println!(
+        "KITTI ATE: evo {:.15} m, ours {:.15} m",
+        stat(&stats, "rmse"),
+        ours.rmse_m
+    );
+    assert_rel(ours.rmse_m, stat(&stats, "rmse"), "KITTI ATE rmse");
 }
 
 #[test]

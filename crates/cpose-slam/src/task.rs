@@ -13,7 +13,9 @@ use std::time::Instant;
 
 use anyhow::{Context as _, bail};
 use cpose_core::TimeRange;
-use cpose_core::eval::{Alignment, AteReport, Trajectory, align_poses, ate, rpe_report, write_tum};
+use cpose_core::eval::{
+    Alignment, AteReport, RpeDelta, Trajectory, align_poses, ate, rpe_report, write_tum,
+};
 use cpose_core::geometry::rotation_angle_between;
 use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
@@ -654,7 +656,7 @@ pub fn run_methods(
                         unit.log(format_args!("no trajectory plot: {e}"));
                     }
                     let drift = ate(gt, &est, Alignment::None, 1e-6)?;
-                    let rpe = rpe_report(gt, &est, 1e-6)?;
+                    let rpe = rpe_report(gt, &est, 1e-6, RpeDelta::Frames(1), Alignment::None)?;
                     Some((report, alignment, drift, rpe))
                 }
                 None => {

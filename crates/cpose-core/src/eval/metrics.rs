@@ -114,29 +114,81 @@ pub struct RpeErrors {
     pub rotation_angle_rad: Vec<f64>,
 }
 
-/// RPE with a step of `delta_frames` (evo `RPE(delta, Unit.frames, all_pairs=False)`): index
-/// pairs `(0, Δ), (Δ, 2Δ), …` (`filters.filter_pairs_by_index`), and for each
-/// `E_i = (Q_i⁻¹ Q_{i+Δ})⁻¹ (P_i⁻¹ P_{i+Δ})` (`RPE.rpe_base`), Q = reference, P = estimate.
-/// Errors when lengths differ, `delta_frames == 0`, or no pair fits.
+/// The step between the two poses of an RPE pair (`evo_rpe --delta D --delta_unit f|m`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RpeDelta {
+    /// Every this many poses.
+    Frames(usize),
+    /// Every this many metres travelled.
+    Metres(f64),
+}
+
+/// The index pairs RPE compares among `poses`, as evo picks them without `--all_pairs`
+/// (`filters.filter_pairs_by_index` and `filter_pairs_by_path`):
+/// - [`RpeDelta::Frames`]`(Δ)`: `(0, Δ), (Δ, 2Δ), …`;
+/// - [`RpeDelta::Metres`]`(d)`: the first pose is chosen; walking on, the path length since the
+///   last chosen pose is accumulated and a pose is chosen once it reaches `d`; consecutive chosen
+///   poses pair up (evo 1.38; earlier versions left the first pose out).
+///
+/// Errors when `Δ = 0`, `d` is not finite and positive, or no pair fits.
+pub fn rpe_pairs(
+    poses: &[Isometry3<f64>],
+    delta: RpeDelta,
+) -> Result<Vec<(usize, usize)>, EvalError> {
+    let pairs: Vec<(usize, usize)> = match delta {
+        RpeDelta::Frames(0) => return Err(EvalError::InvalidDelta),
+        RpeDelta::Frames(step) => (0..poses.len())
+            .step_by(step)
+            .zip((step..poses.len()).step_by(step))
+            .collect(),
+        RpeDelta::Metres(d) if !(d.is_finite() && d > 0.0) => {
+            return Err(EvalError::InvalidDelta);
+        }
+        RpeDelta::Metres(d) => {
+            let mut chosen = vec![0];
+            let mut path = 0.0;
+            for (i, w) in poses.windows(2).enumerate() {
+                path += (w[1].translation.vector - w[0].translation.vector).norm();
+                if path >= d {
+                    chosen.push(i + 1);
+                    path = 0.0;
+                }
+            }
+            chosen.windows(2).map(|w| (w[0], w[1])).collect()
+        }
+    };
+    if pairs.is_empty() {
+        return Err(EvalError::NoPairs {
+            delta: match delta {
+                RpeDelta::Frames(n) => format!("{n} frames"),
+                RpeDelta::Metres(d) => format!("{d} m"),
+            },
+            poses: poses.len(),
+        });
+    }
+    Ok(pairs)
+}
+
+/// RPE with a step of `delta_frames` (evo `RPE(delta, Unit.frames, all_pairs=False)`):
+/// [`rpe_with`] with [`RpeDelta::Frames`].
 pub fn rpe(
     reference: &[Isometry3<f64>],
     estimate: &[Isometry3<f64>],
     delta_frames: usize,
 ) -> Result<RpeErrors, EvalError> {
+    rpe_with(reference, estimate, RpeDelta::Frames(delta_frames))
+}
+
+/// RPE over the pairs [`rpe_pairs`] picks on the estimate's poses (evo's default, without
+/// `--pairs_from_reference`): for each pair `(i, j)`, `E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)`
+/// (`RPE.rpe_base`), Q = reference, P = estimate. Errors when lengths differ or no pair fits.
+pub fn rpe_with(
+    reference: &[Isometry3<f64>],
+    estimate: &[Isometry3<f64>],
+    delta: RpeDelta,
+) -> Result<RpeErrors, EvalError> {
     check_lengths(reference, estimate)?;
-    if delta_frames == 0 {
-        return Err(EvalError::InvalidDelta);
-    }
-    let pairs: Vec<(usize, usize)> = (0..reference.len())
-        .step_by(delta_frames)
-        .zip((delta_frames..reference.len()).step_by(delta_frames))
-        .collect();
-    if pairs.is_empty() {
-        return Err(EvalError::TooFewPoses {
-            needed: delta_frames + 1,
-            got: reference.len(),
-        });
-    }
+    let pairs = rpe_pairs(estimate, delta)?;
     let mut translation = Vec::with_capacity(pairs.len());
     let mut rotation_angle_rad = Vec::with_capacity(pairs.len());
     for &(i, j) in &pairs {
@@ -200,6 +252,33 @@ mod tests {
         assert_eq!(rpe(&a, &a, 7).unwrap().pairs[..2], [(0, 7), (7, 14)]);
         assert!(matches!(rpe(&a, &a, 0), Err(EvalError::InvalidDelta)));
         assert!(rpe(&a[..1], &a[..1], 1).is_err());
+    }
+
+    #[test]
+    fn rpe_pairs_by_path_length_follow_evo() {
+        // Steps of 0.4 m along x: from pose 0 the path reaches 1 m at pose 3 (1.2 m), then at 6
+        // and 9 — evo's filter_pairs_by_path without all_pairs.
+        let a: Vec<_> = (0..11)
+            .map(|i| Isometry3::translation(0.4 * i as f64, 0.0, 0.0))
+            .collect();
+        assert_eq!(
+            rpe_pairs(&a, RpeDelta::Metres(1.0)).unwrap(),
+            [(0, 3), (3, 6), (6, 9)]
+        );
+        assert_eq!(
+            rpe_pairs(&a, RpeDelta::Frames(5)).unwrap(),
+            [(0, 5), (5, 10)]
+        );
+        assert!(matches!(
+            rpe_pairs(&a, RpeDelta::Metres(100.0)),
+            Err(EvalError::NoPairs { poses: 11, .. })
+        ));
+        for bad in [0.0, -1.0, f64::NAN] {
+            assert!(matches!(
+                rpe_pairs(&a, RpeDelta::Metres(bad)),
+                Err(EvalError::InvalidDelta)
+            ));
+        }
     }
 
     #[test]

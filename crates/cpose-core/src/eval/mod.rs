@@ -22,6 +22,7 @@
 
 mod align;
 mod associate;
+mod formats;
 mod metrics;
 mod trajectory;
 mod tum;
@@ -36,8 +37,13 @@ pub use align::{
     BarfPoseErrors, BarfSim3, ReflectionFix, Sim3, barf_pose_errors, procrustes_barf, umeyama,
 };
 pub use associate::{Association, DEFAULT_MAX_DIFF_SECS, associate, associate_with_offset};
+pub use formats::{
+    EUROC_HEADER, MAX_ROTATION_DEFECT, TrajectoryFormat, parse_euroc, parse_kitti, parse_times,
+    read_trajectory, to_euroc_string, to_kitti_string, write_trajectory,
+};
 pub use metrics::{
-    ErrorStats, RpeErrors, ape_rotation_angle, ape_translation, error_stats, rotation_angle, rpe,
+    ErrorStats, RpeDelta, RpeErrors, ape_rotation_angle, ape_translation, error_stats,
+    rotation_angle, rpe, rpe_pairs, rpe_with,
 };
 pub use trajectory::{Trajectory, TrajectoryError};
 pub use tum::{MIN_QUATERNION_NORM, TUM_COLUMNS, parse_tum, read_tum, to_tum_string, write_tum};
@@ -93,9 +99,17 @@ pub enum EvalError {
         /// The offset given.
         offset_second_secs: f64,
     },
-    /// An RPE step of zero frames.
-    #[error("expected an RPE delta of at least 1 frame, got 0")]
+    /// An RPE step of zero frames, or of metres not finite and positive.
+    #[error("expected an RPE delta of at least 1 frame or a positive number of metres")]
     InvalidDelta,
+    /// An RPE step that leaves no pair of poses.
+    #[error("RPE delta {delta} leaves no pair among {poses} poses; try a smaller delta")]
+    NoPairs {
+        /// The delta with its unit.
+        delta: String,
+        /// Number of poses.
+        poses: usize,
+    },
     /// An alignment name that is not `none`, `se3` or `sim3`.
     #[error("expected alignment `none`, `se3` or `sim3`, got `{got}`")]
     UnknownAlignment {
@@ -232,8 +246,8 @@ pub fn ate(
     })
 }
 
-/// Result of [`rpe_report`]: evo's RPE statistics over consecutive associated poses (delta 1
-/// frame), translation part in metres (the trajectories' unit) and rotation angle in degrees.
+/// Result of [`rpe_report`]: evo's RPE statistics, translation part in metres (the
+/// trajectories' unit) and rotation angle in degrees.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RpeReport {
     /// RMSE of the relative translation errors.
@@ -242,6 +256,10 @@ pub struct RpeReport {
     pub trans_mean_m: f64,
     /// Median of the relative translation errors.
     pub trans_median_m: f64,
+    /// Population standard deviation of the relative translation errors.
+    pub trans_std_m: f64,
+    /// Smallest relative translation error.
+    pub trans_min_m: f64,
     /// Largest relative translation error.
     pub trans_max_m: f64,
     /// RMSE of the relative rotation angles.
@@ -250,22 +268,35 @@ pub struct RpeReport {
     pub rot_mean_deg: f64,
     /// Median of the relative rotation angles.
     pub rot_median_deg: f64,
+    /// Population standard deviation of the relative rotation angles.
+    pub rot_std_deg: f64,
+    /// Smallest relative rotation angle.
+    pub rot_min_deg: f64,
     /// Largest relative rotation angle.
     pub rot_max_deg: f64,
     /// Number of pose pairs compared.
     pub num_pairs: usize,
+    /// Number of associated poses the pairs were chosen from.
+    pub num_matched: usize,
+    /// The alignment applied to the estimate first.
+    pub alignment: Alignment,
 }
 
-/// Relative pose error as `evo_rpe tum GT EST --delta 1 --delta_unit f --t_max_diff max_diff_secs`
-/// (`-r trans_part` and `-r angle_deg`): association ([`associate`]`(gt, est, max_diff_secs)`),
-/// then [`rpe`] with a delta of 1 frame. No alignment: RPE is invariant to a rigid change of frame.
+/// Relative pose error as `evo_rpe tum GT EST --delta D --delta_unit f|m [-a|-as] --t_max_diff
+/// max_diff_secs` (`-r trans_part` and `-r angle_deg`): association ([`associate`]), the
+/// alignment (RPE is invariant to a rigid change of frame, not to Sim(3)'s scale), then
+/// [`rpe_with`].
 pub fn rpe_report(
     gt: &Trajectory,
     est: &Trajectory,
     max_diff_secs: f64,
+    delta: RpeDelta,
+    align: Alignment,
 ) -> Result<RpeReport, EvalError> {
-    let (reference, estimate) = associate(gt, est, max_diff_secs)?.poses(gt, est);
-    let errors = rpe(&reference, &estimate, 1)?;
+    let association = associate(gt, est, max_diff_secs)?;
+    let (reference, estimate) = association.poses(gt, est);
+    let (_, aligned) = align_poses(&reference, &estimate, align)?;
+    let errors = rpe_with(&reference, &aligned, delta)?;
     let trans = error_stats(&errors.translation)?;
     let deg: Vec<f64> = errors
         .rotation_angle_rad
@@ -277,12 +308,18 @@ pub fn rpe_report(
         trans_rmse_m: trans.rmse,
         trans_mean_m: trans.mean,
         trans_median_m: trans.median,
+        trans_std_m: trans.std,
+        trans_min_m: trans.min,
         trans_max_m: trans.max,
         rot_rmse_deg: rot.rmse,
         rot_mean_deg: rot.mean,
         rot_median_deg: rot.median,
+        rot_std_deg: rot.std,
+        rot_min_deg: rot.min,
         rot_max_deg: rot.max,
         num_pairs: errors.pairs.len(),
+        num_matched: association.len(),
+        alignment: align,
     })
 }
 

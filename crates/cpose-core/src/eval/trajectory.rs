@@ -99,6 +99,65 @@ pub enum TrajectoryError {
         /// This line's timestamp, seconds.
         timestamp: f64,
     },
+    /// A line with the wrong number of values for its format (EuRoC, KITTI, a times file).
+    #[error("line {line}: expected {expected}, got {got} values: {}", path.display())]
+    Columns {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What the format needs.
+        expected: &'static str,
+        /// Number of values found.
+        got: usize,
+    },
+    /// A KITTI matrix that is not a rotation.
+    #[error("line {line}: expected a rotation matrix in `r11 … r33`, got one {defect:.2e} away from orthonormal: {}", path.display())]
+    NotARotation {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// `max(‖RᵀR − I‖_F, |det R − 1|)`.
+        defect: f64,
+    },
+    /// A file whose format cannot be told from its first data line.
+    #[error(
+        "cannot tell the trajectory format: expected 8 values (TUM), 12 (KITTI) or a csv of at least 8 (EuRoC) on the first data line, got {got}; name the format with --format: {}",
+        path.display()
+    )]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+        /// Number of values on its first data line.
+        got: usize,
+    },
+    /// A KITTI trajectory read without its times file.
+    #[error("a KITTI trajectory has no timestamps: expected its times file (one time in seconds per line, as KITTI's times.txt; on the command line --gt-times, --est-times or --times) for: {}", path.display())]
+    MissingTimes {
+        /// The pose file.
+        path: PathBuf,
+    },
+    /// A times file with another number of lines than its pose file has poses.
+    #[error("expected one time per pose: {} has {poses} poses, {} {times} times", path.display(), times_path.display())]
+    TimesCount {
+        /// The pose file.
+        path: PathBuf,
+        /// Number of poses.
+        poses: usize,
+        /// The times file.
+        times_path: PathBuf,
+        /// Number of times.
+        times: usize,
+    },
+    /// A file whose values break a [`Trajectory`] invariant (timestamps out of order …).
+    #[error("{reason}: {}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The broken invariant.
+        reason: String,
+    },
     /// [`Trajectory::new`] got different numbers of timestamps and poses.
     #[error("expected as many poses as timestamps ({timestamps}), got {poses}")]
     LengthMismatch {
