@@ -28,10 +28,12 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use cpose_core::Config;
 use cpose_core::eval::{self, Alignment, RpeDelta, Trajectory, TrajectoryFormat};
+use cpose_core::plot;
 use cpose_core::provenance::{Build, Recorder, Session};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{RunDir, RunDirOptions};
 use cpose_core::study;
+use nalgebra::Isometry3;
 
 mod table;
 
@@ -121,6 +123,10 @@ struct TrajectoryInputs {
     /// Print the full report as JSON instead of text.
     #[arg(long)]
     json: bool,
+    /// Also draw plots into DIR (created; existing plots of the same names are refused), as
+    /// evo's `--plot`: the aligned estimate against the reference, and the errors over time.
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
 }
 
 impl TrajectoryInputs {
@@ -134,6 +140,24 @@ impl TrajectoryInputs {
             read(&self.gt, &self.gt_times)?,
             read(&self.est, &self.est_times)?,
         ))
+    }
+
+    /// The paths of `names` in the `--plot` folder (created), refusing ones that exist.
+    fn plot_files(&self, names: &[&str]) -> Result<Option<Vec<PathBuf>>, Failure> {
+        let Some(dir) = &self.plot else {
+            return Ok(None);
+        };
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating the plot folder {}", dir.display()))
+            .map_err(Failure::Usage)?;
+        let files: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
+        if let Some(taken) = files.iter().find(|f| f.exists()) {
+            return Err(Failure::Usage(anyhow::anyhow!(
+                "{} exists; choose another --plot folder",
+                taken.display()
+            )));
+        }
+        Ok(Some(files))
     }
 
     fn context(&self) -> String {
@@ -425,9 +449,17 @@ fn run_task(
 /// `cpose eval ate GT EST`: association, alignment and translation-error statistics (metres).
 fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
     let (gt, est) = args.inputs.read()?;
+    let plots = args
+        .inputs
+        .plot_files(&["ate_trajectories.png", "ate_error.png"])?;
     let report = eval::ate(&gt, &est, args.align, args.inputs.max_diff)
         .with_context(|| args.inputs.context())
         .map_err(Failure::Run)?;
+    if let Some(files) = plots {
+        plot_ate(&files, &gt, &est, args.align, args.inputs.max_diff)
+            .with_context(|| args.inputs.context())
+            .map_err(Failure::Run)?;
+    }
     let text = if args.inputs.json {
         serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
     } else {
@@ -469,9 +501,15 @@ fn eval_rpe(args: &RpeArgs) -> Result<(), Failure> {
         }
     };
     let (gt, est) = args.inputs.read()?;
+    let plots = args.inputs.plot_files(&["rpe_error.png"])?;
     let report = eval::rpe_report(&gt, &est, args.inputs.max_diff, delta, args.align)
         .with_context(|| args.inputs.context())
         .map_err(Failure::Run)?;
+    if let Some(files) = plots {
+        plot_rpe(&files[0], &gt, &est, args, delta)
+            .with_context(|| args.inputs.context())
+            .map_err(Failure::Run)?;
+    }
     let text = if args.inputs.json {
         serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
     } else {
@@ -541,5 +579,139 @@ fn convert(args: &ConvertArgs) -> Result<(), Failure> {
         trajectory.len(),
         args.output.display()
     );
+    Ok(())
+}
+
+/// How a plot title names an alignment.
+fn aligned_how(align: Alignment) -> &'static str {
+    match align {
+        Alignment::None => "not aligned",
+        Alignment::Se3 => "SE(3)-aligned",
+        Alignment::Sim3 => "Sim(3)-aligned",
+    }
+}
+
+/// The associated reference poses, the estimate aligned onto them, and their times (the
+/// reference's), as `cpose eval` compares them.
+struct Compared {
+    times: Vec<f64>,
+    reference: Vec<Isometry3<f64>>,
+    aligned: Vec<Isometry3<f64>>,
+}
+
+fn aligned_pairs(
+    gt: &Trajectory,
+    est: &Trajectory,
+    align: Alignment,
+    max_diff: f64,
+) -> anyhow::Result<Compared> {
+    let association = eval::associate(gt, est, max_diff)?;
+    let (reference, estimate) = association.poses(gt, est);
+    let (_, aligned) = eval::align_poses(&reference, &estimate, align)?;
+    let times = association
+        .pairs
+        .iter()
+        .map(|&(i, _)| gt.timestamps_secs()[i])
+        .collect();
+    Ok(Compared {
+        times,
+        reference,
+        aligned,
+    })
+}
+
+/// `eval ate --plot`: the aligned estimate against the reference (top view, x y z, roll pitch
+/// yaw over time) and the position error over time.
+fn plot_ate(
+    files: &[PathBuf],
+    gt: &Trajectory,
+    est: &Trajectory,
+    align: Alignment,
+    max_diff: f64,
+) -> anyhow::Result<()> {
+    let Compared {
+        times,
+        reference,
+        aligned,
+    } = aligned_pairs(gt, est, align, max_diff)?;
+    plot::trajectory_comparison(
+        &files[0],
+        &format!("estimate ({}) against the reference", aligned_how(align)),
+        &times,
+        Some(&reference),
+        None,
+        ("estimate", &aligned),
+    )?;
+    let errors = eval::ape_translation(&reference, &aligned)?;
+    let t0 = times[0];
+    plot::errors_over_time(
+        &files[1],
+        &format!("absolute position error ({})", aligned_how(align)),
+        "position error (m)",
+        &[plot::Line {
+            label: "estimate".to_owned(),
+            x: times.iter().map(|t| t - t0).collect(),
+            y: errors,
+            style: plot::SeriesStyle::Estimate(0),
+        }],
+    )?;
+    Ok(())
+}
+
+/// `eval rpe --plot`: the relative translation and rotation errors against the time of each
+/// pair's second pose.
+fn plot_rpe(
+    file: &Path,
+    gt: &Trajectory,
+    est: &Trajectory,
+    args: &RpeArgs,
+    delta: RpeDelta,
+) -> anyhow::Result<()> {
+    let Compared {
+        times,
+        reference,
+        aligned,
+    } = aligned_pairs(gt, est, args.align, args.inputs.max_diff)?;
+    let errors = eval::rpe_with(&reference, &aligned, delta)?;
+    let t0 = times[0];
+    let x: Vec<f64> = errors.pairs.iter().map(|&(_, j)| times[j] - t0).collect();
+    let line = |y: Vec<f64>| plot::Line {
+        label: "estimate".to_owned(),
+        x: x.clone(),
+        y,
+        style: plot::SeriesStyle::Estimate(0),
+    };
+    let unit = if args.delta_unit == "m" {
+        "m"
+    } else {
+        "frames"
+    };
+    plot::stacked_line_charts(
+        file,
+        &format!(
+            "relative pose error, pairs {} {unit} apart ({})",
+            args.delta,
+            aligned_how(args.align)
+        ),
+        "time of the pair's second pose (s)",
+        &[
+            plot::Panel {
+                y_label: "translation error (m)".to_owned(),
+                y_scale: plot::YScale::LinearFromZero,
+                lines: vec![line(errors.translation.clone())],
+            },
+            plot::Panel {
+                y_label: "rotation error (°)".to_owned(),
+                y_scale: plot::YScale::LinearFromZero,
+                lines: vec![line(
+                    errors
+                        .rotation_angle_rad
+                        .iter()
+                        .map(|a| a.to_degrees())
+                        .collect(),
+                )],
+            },
+        ],
+    )?;
     Ok(())
 }

@@ -202,6 +202,36 @@ fn eval_rpe_prints_the_library_report_in_frames_and_metres() {
             ours.num_pairs
         );
     }
+    // --plot draws the errors (and for ate the trajectories) into a new folder, never over a plot.
+    let plots = temp_dir("eval-plots").join("plots");
+    for (command, file) in [("ate", "ate_trajectories.png"), ("rpe", "rpe_error.png")] {
+        let args = [
+            "eval",
+            command,
+            gt.to_str().unwrap(),
+            est.to_str().unwrap(),
+            "--plot",
+        ];
+        let out = cpose_in(
+            &workspace_root(),
+            &[&args[..], &[plots.to_str().unwrap()]].concat(),
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            std::fs::read(plots.join(file))
+                .unwrap()
+                .starts_with(b"\x89PNG")
+        );
+        let again = cpose_in(
+            &workspace_root(),
+            &[&args[..], &[plots.to_str().unwrap()]].concat(),
+        );
+        assert_eq!(again.status.code(), Some(2));
+    }
     // Half a frame is no delta.
     let out = cpose_in(
         &workspace_root(),
