@@ -76,6 +76,11 @@ enum Command {
     Table(TableArgs),
     /// Convert a trajectory file between the TUM, EuRoC csv and KITTI formats.
     Convert(ConvertArgs),
+    /// Print the completion script of a shell, e.g. `cpose completions bash > cpose.bash`.
+    Completions {
+        /// The shell: bash, elvish, fish, powershell or zsh.
+        shell: clap_complete::Shell,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -268,6 +273,11 @@ where
         Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
         Command::Eval(EvalCommand::Rpe(args)) => eval_rpe(&args),
         Command::Convert(args) => convert(&args),
+        Command::Completions { shell } => {
+            let mut command = <Cli as clap::CommandFactory>::command();
+            clap_complete::generate(shell, &mut command, "cpose", &mut std::io::stdout());
+            Ok(())
+        }
         Command::Table(args) => table::metrics_table(&args.runs, &args.metrics)
             .map(|text| {
                 let _ = std::io::stdout().lock().write_all(text.as_bytes());

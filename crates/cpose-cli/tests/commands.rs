@@ -313,6 +313,20 @@ fn convert_round_trips_every_format_and_never_replaces_a_file_unasked() {
     assert!(!dir.join("d.txt").exists());
 }
 
+#[test]
+fn completions_cover_every_command_for_every_shell() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let out = cpose_in(&workspace_root(), &["completions", shell]);
+        assert!(out.status.success(), "{shell}");
+        let script = String::from_utf8(out.stdout).unwrap();
+        for command in ["run", "eval", "rpe", "convert", "table", "list"] {
+            assert!(script.contains(command), "{shell}: no {command}");
+        }
+    }
+    let out = cpose_in(&workspace_root(), &["completions", "tcsh"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
 /// A run folder records which build, command line and machine made it (`provenance.json`), and
 /// `cpose table` prints its counts as integers, on stdout.
 #[test]
