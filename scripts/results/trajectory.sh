@@ -5,7 +5,7 @@
 #
 #   scripts/results/trajectory.sh [TABLE...]
 #
-# TABLE is synthetic, euroc or bands (default: all three). Runs go to
+# TABLE is synthetic, euroc, bands or patience (default: all four). Runs go to
 # runs/results/trajectory/NAME (common.sh: environment); a finished run is kept and an
 # interrupted one resumed. The tables are printed to stdout.
 set -eu
@@ -42,7 +42,16 @@ table_bands() {
         rot_err_deg,trans_err_m,known_rot_err_deg,known_trans_err_m,fit_steps,fit_stop $dirs
 }
 
-tables=$(tables_from "synthetic euroc bands" "$@")
+table_patience() {
+    # Loose PoseNet on EuRoC with plateaus of 4000 steps and three rate drops (default 1000, two).
+    run euroc-loose-patience configs/euroc_v102_fit.toml --set "$euroc_data" \
+        --set 'fit.fields=["posenet"]' --set 'fit.imu=["loose"]' --set fit.plateau_steps=4000 \
+        --set fit.lr_drops=3
+    table "Loose PoseNet on EuRoC with more patience (--set fit.plateau_steps=4000 --set fit.lr_drops=3)" \
+        "$metrics" "$out/euroc-loose-patience"
+}
+
+tables=$(tables_from "synthetic euroc bands patience" "$@")
 for t in $tables; do
     "table_$t"
 done

@@ -314,6 +314,40 @@ fn convert_round_trips_every_format_and_never_replaces_a_file_unasked() {
 }
 
 #[test]
+fn the_synthetic_room_is_never_generated_into_a_folder_it_did_not_write() {
+    let dir = temp_dir("real-dataset");
+    let real = dir.join("replica_room");
+    std::fs::create_dir_all(&real).unwrap();
+    let frame = write(&real, "frame000000.jpg", "the user's own frame");
+    let config = workspace_root().join("configs/synthetic_room.toml");
+    let path = format!("data.path={:?}", real.to_str().unwrap());
+    let out_dir = dir.join("run");
+    let out = cpose_in(
+        &dir,
+        &[
+            "run",
+            config.to_str().unwrap(),
+            "--set",
+            &path,
+            "--out",
+            out_dir.to_str().unwrap(),
+            "-q",
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("not written by the synthetic generator"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&frame).unwrap(),
+        "the user's own frame"
+    );
+    assert_eq!(std::fs::read_dir(&real).unwrap().count(), 1);
+}
+
+#[test]
 fn completions_cover_every_command_for_every_shell() {
     for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
         let out = cpose_in(&workspace_root(), &["completions", shell]);

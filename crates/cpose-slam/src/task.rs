@@ -331,7 +331,9 @@ fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyh
 
 /// Runs `generate` (which writes a dataset into `path`, reporting `(frame, frames)` as it goes,
 /// and returns the number of frames) unless `path` already holds what `recipe` describes:
-/// the recipe is recorded in `path/synthetic.json` once every frame is written.
+/// the recipe is recorded in `path/synthetic.json` once every frame is written. A non-empty
+/// folder without that file is refused: it may hold a real dataset, which generating would
+/// overwrite.
 pub fn ensure_generated(
     path: &Path,
     recipe: &serde_json::Value,
@@ -346,6 +348,16 @@ pub fn ensure_generated(
             .run_dir
             .log(format_args!("synthetic data: reusing {}", path.display()));
         return Ok(());
+    }
+    let foreign = !stamp.exists()
+        && std::fs::read_dir(path).is_ok_and(|mut entries| entries.next().is_some());
+    if foreign {
+        bail!(
+            "{} is not empty and was not written by the synthetic generator (no synthetic.json); \
+             it may hold a real dataset, so nothing is generated there: set data.path to an \
+             empty or new folder, or set data.source to the dataset's format",
+            path.display()
+        );
     }
     let started = Instant::now();
     let progress = input.progress(frames as u64, "rendering");
