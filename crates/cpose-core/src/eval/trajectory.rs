@@ -26,20 +26,10 @@ pub enum TrajectoryError {
         source: std::io::Error,
     },
     /// No pose line at all (only comments or blank lines, or nothing).
-    #[error("expected at least one pose line `timestamp tx ty tz qx qy qz qw`, got none: {}", path.display())]
+    #[error("expected at least one pose line, got none: {}", path.display())]
     Empty {
         /// The file.
         path: PathBuf,
-    },
-    /// A line with the wrong number of values.
-    #[error("line {line}: expected 8 columns `timestamp tx ty tz qx qy qz qw`, got {got}: {}", path.display())]
-    ColumnCount {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// Number of values found.
-        got: usize,
     },
     /// A value that does not parse as a number.
     #[error("line {line}: expected a number for `{column}`, got `{text}`: {}", path.display())]
@@ -99,8 +89,8 @@ pub enum TrajectoryError {
         /// This line's timestamp, seconds.
         timestamp: f64,
     },
-    /// A line with the wrong number of values for its format (EuRoC, KITTI, a times file).
-    #[error("line {line}: expected {expected}, got {got} values: {}", path.display())]
+    /// A line with the wrong number of values for its format.
+    #[error("line {line}: expected {expected}, got {got}: {}", path.display())]
     Columns {
         /// The file.
         path: PathBuf,

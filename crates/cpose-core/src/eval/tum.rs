@@ -51,9 +51,10 @@ pub fn parse_tum(text: &str, path: &Path) -> Result<Trajectory, TrajectoryError>
             trimmed.split_whitespace().collect()
         };
         if fields.len() != TUM_COLUMNS.len() {
-            return Err(TrajectoryError::ColumnCount {
+            return Err(TrajectoryError::Columns {
                 path: path.to_path_buf(),
                 line,
+                expected: "8 columns `timestamp tx ty tz qx qy qz qw`",
                 got: fields.len(),
             });
         }
@@ -261,7 +262,7 @@ mod tests {
         let (err, msg) = error_of("cols.txt", "# c\n1 2 3 4 5 6 7\n");
         assert!(matches!(
             err,
-            TrajectoryError::ColumnCount {
+            TrajectoryError::Columns {
                 line: 2,
                 got: 7,
                 ..
