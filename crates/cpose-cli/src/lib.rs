@@ -138,8 +138,7 @@ impl TrajectoryInputs {
     /// Both trajectories, read; errors name the file.
     fn read(&self) -> Result<(Trajectory, Trajectory), Failure> {
         let read = |path: &Path, times: &Option<PathBuf>| {
-            eval::read_trajectory(path, self.format, times.as_deref())
-                .map_err(|e| Failure::Usage(e.into()))
+            read_trajectory(path, self.format, times.as_deref())
         };
         Ok((
             read(&self.gt, &self.gt_times)?,
@@ -551,6 +550,24 @@ fn eval_rpe(args: &RpeArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// [`eval::read_trajectory`], saying on stderr how many repeated timestamps it dropped.
+fn read_trajectory(
+    path: &Path,
+    format: Option<TrajectoryFormat>,
+    times: Option<&Path>,
+) -> Result<Trajectory, Failure> {
+    let (trajectory, duplicates) =
+        eval::read_trajectory(path, format, times).map_err(|e| Failure::Usage(e.into()))?;
+    if let Some(first) = duplicates.lines.first() {
+        eprintln!(
+            "cpose: {}: {} repeated timestamp(s) (first on line {first}); kept the later pose of each",
+            path.display(),
+            duplicates.lines.len()
+        );
+    }
+    Ok(trajectory)
+}
+
 /// `cpose convert`: reads a trajectory in one format and writes it in another, never over an
 /// existing file unless `--force`.
 fn convert(args: &ConvertArgs) -> Result<(), Failure> {
@@ -575,8 +592,7 @@ fn convert(args: &ConvertArgs) -> Result<(), Failure> {
             )));
         }
     }
-    let trajectory = eval::read_trajectory(&args.input, args.from, args.times.as_deref())
-        .map_err(|e| usage(e.into()))?;
+    let trajectory = read_trajectory(&args.input, args.from, args.times.as_deref())?;
     eval::write_trajectory(&args.output, &trajectory, to, args.out_times.as_deref())
         .map_err(|e| Failure::Run(e.into()))?;
     let lost = if to == TrajectoryFormat::Kitti && args.out_times.is_none() {

@@ -123,12 +123,6 @@ fn eval_ate_rejects_malformed_trajectories_with_file_and_line() {
             "line 2",
             "increasing",
         ),
-        (
-            "duplicate.txt",
-            "1.0 0 0 0 0 0 0 1\n1.0 1 0 0 0 0 0 1\n",
-            "line 2",
-            "duplicate",
-        ),
     ];
     for (name, text, line, what) in cases {
         let bad = write(&dir, name, text);
@@ -144,6 +138,27 @@ fn eval_ate_rejects_malformed_trajectories_with_file_and_line() {
         );
         assert_eq!(err.lines().count(), 1, "{name}: printed once: {err}");
     }
+    // A repeated timestamp is read (the later pose kept) and reported once, as evo reads it.
+    let repeated = write(
+        &dir,
+        "repeated.txt",
+        "1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 0 1\n2.0 1 0.1 0 0 0 0 1\n3.0 1 1 0 0 0 0 1\n",
+    );
+    let out = cpose_in(
+        &dir,
+        &[
+            "eval",
+            "ate",
+            good.to_str().unwrap(),
+            repeated.to_str().unwrap(),
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("repeated.txt: 1 repeated timestamp(s) (first on line 3)"),
+        "{err}"
+    );
     let missing = dir.join("missing.txt");
     let out = cpose_in(
         &dir,

@@ -315,7 +315,7 @@ fn euroc_and_kitti_files_give_evo_ape_s_numbers() {
     // a perturbed copy of every 10th pose; and the same ground truth as cpose writes it.
     let data = cpose_core::fs::shared_data_dir().unwrap();
     let euroc_gt = data.join("euroc/V1_02_excerpt/mav0/state_groundtruth_estimate0/data.csv");
-    let real = read_trajectory(&euroc_gt, None, None).unwrap();
+    let (real, _) = read_trajectory(&euroc_gt, None, None).unwrap();
     let (times, poses): (Vec<f64>, Vec<_>) = real
         .iter()
         .step_by(10)
@@ -337,7 +337,7 @@ fn euroc_and_kitti_files_give_evo_ape_s_numbers() {
     let written_gt = temp_path("gt.csv");
     write_trajectory(&written_gt, &real, TrajectoryFormat::Euroc, None).unwrap();
     for gt_csv in [euroc_gt.as_path(), written_gt.as_path()] {
-        let gt_back = read_trajectory(gt_csv, None, None).unwrap();
+        let (gt_back, _) = read_trajectory(gt_csv, None, None).unwrap();
         let ours =
             cpose_core::eval::ate(&gt_back, &estimate, Alignment::Se3, DEFAULT_MAX_DIFF_SECS)
                 .unwrap();
@@ -387,8 +387,8 @@ fn euroc_and_kitti_files_give_evo_ape_s_numbers() {
     )
     .unwrap();
     write_trajectory(&est_txt, &estimate, TrajectoryFormat::Kitti, None).unwrap();
-    let ref_back = read_trajectory(&ref_txt, None, Some(&times_txt)).unwrap();
-    let est_back = read_trajectory(&est_txt, None, Some(&times_txt)).unwrap();
+    let (ref_back, _) = read_trajectory(&ref_txt, None, Some(&times_txt)).unwrap();
+    let (est_back, _) = read_trajectory(&est_txt, None, Some(&times_txt)).unwrap();
     let ours = cpose_core::eval::ate(&ref_back, &est_back, Alignment::Se3, 1e-9).unwrap();
     let evo = run_evo(
         test,
@@ -410,6 +410,65 @@ fn euroc_and_kitti_files_give_evo_ape_s_numbers() {
         ours.rmse_m
     );
     assert_rel(ours.rmse_m, stat(&stats, "rmse"), "KITTI ATE rmse");
+}
+
+#[test]
+fn a_repeated_ground_truth_timestamp_gives_evo_ape_s_number() {
+    let test = "a_repeated_ground_truth_timestamp_gives_evo_ape_s_number";
+    let Some((gt_path, est_path)) = tum_files(test) else {
+        return;
+    };
+    let (gt, est) = load(&gt_path, &est_path);
+    // Repeat the ground-truth line matched to the 100th estimate, 5 cm off, right after it (as
+    // TUM RGB-D's fr2/desk ground truth repeats one timestamp).
+    let association = associate(&gt, &est, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let (index, _) = association.pairs[100];
+    let text = std::fs::read_to_string(&gt_path).unwrap();
+    let stamp = gt.timestamps_secs()[index];
+    let mut out = String::new();
+    for line in text.lines() {
+        out.push_str(line);
+        out.push('\n');
+        let values: Vec<f64> = line
+            .split_whitespace()
+            .map(|v| v.parse().unwrap_or(f64::NAN))
+            .collect();
+        if values.len() == 8 && values[0] == stamp {
+            let mut moved = values.clone();
+            moved[1] += 0.05;
+            let fields: Vec<String> = moved.iter().map(|v| v.to_string()).collect();
+            out.push_str(&format!("{}\n", fields.join(" ")));
+        }
+    }
+    let repeated = temp_path("gt_repeated.txt");
+    std::fs::write(&repeated, out).unwrap();
+    let (gt_read, duplicates) = read_trajectory(&repeated, None, None).unwrap();
+    assert_eq!(duplicates.lines.len(), 1);
+    assert_eq!(gt_read.len(), gt.len());
+    let ours =
+        cpose_core::eval::ate(&gt_read, &est, Alignment::Se3, DEFAULT_MAX_DIFF_SECS).unwrap();
+    let unchanged =
+        cpose_core::eval::ate(&gt, &est, Alignment::Se3, DEFAULT_MAX_DIFF_SECS).unwrap();
+    assert_ne!(ours.rmse_m, unchanged.rmse_m, "the repeat is used");
+    let args = [
+        "tum",
+        repeated.to_str().unwrap(),
+        est_path.to_str().unwrap(),
+        "-a",
+    ];
+    let evo = run_evo(test, "evo_ape", &args);
+    std::fs::remove_file(&repeated).unwrap();
+    let Some(stats) = evo else { return };
+    println!(
+        "repeated timestamp: evo ATE {:.15} m, ours {:.15} m",
+        stat(&stats, "rmse"),
+        ours.rmse_m
+    );
+    assert_rel(
+        ours.rmse_m,
+        stat(&stats, "rmse"),
+        "ATE rmse with a repeated timestamp",
+    );
 }
 
 #[test]

@@ -22,8 +22,8 @@ use std::str::FromStr;
 
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
 
-use super::trajectory::{Trajectory, TrajectoryError};
-use super::tum::{MIN_QUATERNION_NORM, parse_tum, to_tum_string};
+use super::trajectory::{Duplicates, PoseLines, Trajectory, TrajectoryError};
+use super::tum::{MIN_QUATERNION_NORM, parse_tum_lines, to_tum_string};
 use crate::fs::write_atomic;
 
 /// Largest `‖RᵀR − I‖_F` (or `|det R − 1|`) accepted for a KITTI rotation before it is
@@ -117,13 +117,14 @@ fn read_text(path: &Path) -> Result<String, TrajectoryError> {
     })
 }
 
-/// Reads a trajectory file in `format` (detected when `None`). KITTI files need `kitti_times`,
-/// their times file; it is ignored for the other formats.
+/// Reads a trajectory file in `format` (detected when `None`), with the lines whose timestamp
+/// repeated the line before ([`Duplicates`]: the later pose is kept). KITTI files need
+/// `kitti_times`, their times file; it is ignored for the other formats.
 pub fn read_trajectory(
     path: impl AsRef<Path>,
     format: Option<TrajectoryFormat>,
     kitti_times: Option<&Path>,
-) -> Result<Trajectory, TrajectoryError> {
+) -> Result<(Trajectory, Duplicates), TrajectoryError> {
     let path = path.as_ref();
     let text = read_text(path)?;
     let format = match format {
@@ -131,7 +132,7 @@ pub fn read_trajectory(
         None => TrajectoryFormat::detect(path, &text)?,
     };
     match format {
-        TrajectoryFormat::Tum => parse_tum(&text, path),
+        TrajectoryFormat::Tum => parse_tum_lines(&text, path),
         TrajectoryFormat::Euroc => parse_euroc(&text, path),
         TrajectoryFormat::Kitti => {
             let times_path = kitti_times.ok_or_else(|| TrajectoryError::MissingTimes {
@@ -147,7 +148,11 @@ pub fn read_trajectory(
                     times: times.len(),
                 });
             }
-            Trajectory::new(times, poses)
+            let mut lines = PoseLines::new(path);
+            for ((line, _), (time, pose)) in data_lines(&text).zip(times.into_iter().zip(poses)) {
+                lines.push(line, time, pose)?;
+            }
+            lines.finish()
         }
     }
 }
@@ -226,11 +231,11 @@ fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
 
 const EUROC_COLUMNS: [&str; 8] = ["timestamp", "p_x", "p_y", "p_z", "q_w", "q_x", "q_y", "q_z"];
 
-/// Parses an EuRoC csv trajectory (module docs); `path` names the origin in errors.
-pub fn parse_euroc(text: &str, path: &Path) -> Result<Trajectory, TrajectoryError> {
+/// Parses an EuRoC csv trajectory (module docs); `path` names the origin in errors. A repeated
+/// timestamp keeps the later pose ([`Duplicates`]).
+pub fn parse_euroc(text: &str, path: &Path) -> Result<(Trajectory, Duplicates), TrajectoryError> {
     let expected = "at least 8 comma-separated columns `timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z` (EuRoC csv)";
-    let mut times = Vec::new();
-    let mut poses = Vec::new();
+    let mut poses = PoseLines::new(path);
     for (line, l) in data_lines(text) {
         let fields: Vec<&str> = l.split(',').map(str::trim).collect();
         if fields.len() < EUROC_COLUMNS.len() {
@@ -251,13 +256,13 @@ pub fn parse_euroc(text: &str, path: &Path) -> Result<Trajectory, TrajectoryErro
                 norm,
             });
         }
-        times.push(v[0] / 1e9);
-        poses.push(Isometry3::from_parts(
+        let pose = Isometry3::from_parts(
             Translation3::new(v[1], v[2], v[3]),
             UnitQuaternion::from_quaternion(q),
-        ));
+        );
+        poses.push(line, v[0] / 1e9, pose)?;
     }
-    checked(times, poses, path)
+    poses.finish()
 }
 
 const KITTI_COLUMNS: [&str; 12] = [
@@ -321,23 +326,6 @@ pub fn parse_times(text: &str, path: &Path) -> Result<Vec<f64>, TrajectoryError>
             Ok(numbers(fields, path, line, &["timestamp"])?[0])
         })
         .collect()
-}
-
-/// A [`Trajectory`] of what a file held, with file-named errors for timestamps out of order.
-fn checked(
-    times: Vec<f64>,
-    poses: Vec<Isometry3<f64>>,
-    path: &Path,
-) -> Result<Trajectory, TrajectoryError> {
-    if times.is_empty() {
-        return Err(TrajectoryError::Empty {
-            path: path.to_path_buf(),
-        });
-    }
-    Trajectory::new(times, poses).map_err(|e| TrajectoryError::Invalid {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })
 }
 
 /// The text of an EuRoC csv pose file: [`EUROC_HEADER`], then one line per pose with the
@@ -417,7 +405,8 @@ mod tests {
             TrajectoryFormat::detect(Path::new("gt.txt"), text).unwrap(),
             TrajectoryFormat::Euroc
         );
-        let t = parse_euroc(text, path).unwrap();
+        let (t, duplicates) = parse_euroc(text, path).unwrap();
+        assert!(duplicates.is_empty());
         assert_eq!(t.timestamps_secs()[0], 1403715524922140000.0 / 1e9);
         assert_eq!(
             t.poses()[0].translation.vector,
@@ -440,7 +429,7 @@ mod tests {
             TrajectoryFormat::detect(&pose_path, poses).unwrap(),
             TrajectoryFormat::Kitti
         );
-        let t = read_trajectory(&pose_path, None, Some(&times_path)).unwrap();
+        let (t, _) = read_trajectory(&pose_path, None, Some(&times_path)).unwrap();
         assert_eq!(t.timestamps_secs(), &[0.0, 0.15]);
         let p = t.poses()[0];
         assert_eq!(p.translation.vector, Vector3::new(1.0, 2.0, 3.0));
@@ -488,7 +477,7 @@ mod tests {
             let times = temp_path("times.txt");
             write_trajectory(&path, &t, format, Some(&times)).unwrap();
             // Detected from the file alone.
-            let back = read_trajectory(&path, None, Some(&times)).unwrap();
+            let (back, _) = read_trajectory(&path, None, Some(&times)).unwrap();
             // EuRoC rounds to the nanosecond; the others keep every digit.
             let tol = if format == TrajectoryFormat::Euroc {
                 5e-7

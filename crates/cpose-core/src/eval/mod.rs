@@ -45,8 +45,11 @@ pub use metrics::{
     ErrorStats, RpeDelta, RpeErrors, ape_rotation_angle, ape_translation, error_stats,
     rotation_angle, rpe, rpe_pairs, rpe_with,
 };
-pub use trajectory::{Trajectory, TrajectoryError};
-pub use tum::{MIN_QUATERNION_NORM, TUM_COLUMNS, parse_tum, read_tum, to_tum_string, write_tum};
+pub use trajectory::{Duplicates, Trajectory, TrajectoryError};
+pub use tum::{
+    MIN_QUATERNION_NORM, TUM_COLUMNS, parse_tum, parse_tum_lines, read_tum, to_tum_string,
+    write_tum,
+};
 
 /// Errors of association, alignment and metrics.
 #[derive(Debug, thiserror::Error)]

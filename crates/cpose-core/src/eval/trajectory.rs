@@ -1,6 +1,6 @@
 //! A timed sequence of poses, and the errors of building or reading one.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use nalgebra::Isometry3;
 
@@ -64,18 +64,6 @@ pub enum TrajectoryError {
         line: usize,
         /// Its Euclidean norm.
         norm: f64,
-    },
-    /// A timestamp equal to an earlier one.
-    #[error("line {line}: expected a unique timestamp, got {timestamp} again (first on line {first_line}): {}", path.display())]
-    DuplicateTimestamp {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number of the repeat.
-        line: usize,
-        /// 1-based line number of the first occurrence.
-        first_line: usize,
-        /// The repeated timestamp, seconds.
-        timestamp: f64,
     },
     /// A timestamp smaller than the one before it.
     #[error("line {line}: expected increasing timestamps, got {timestamp} after {previous}: {}", path.display())]
@@ -272,6 +260,81 @@ impl Trajectory {
             .iter()
             .copied()
             .zip(self.world_from_body.iter())
+    }
+}
+
+/// The lines of a trajectory file that repeated the timestamp of the line before them: each one's
+/// pose replaced that line's (the last pose of a timestamp is kept, the one evo's association
+/// picks when the file is the longer trajectory). Real recordings have them (TUM RGB-D's fr2/desk
+/// ground truth has one).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Duplicates {
+    /// 1-based line numbers of the repeats.
+    pub lines: Vec<usize>,
+}
+
+impl Duplicates {
+    /// Whether no timestamp repeated.
+    pub fn is_empty(&self) -> bool {
+        self.lines.is_empty()
+    }
+}
+
+/// Collects a file's poses line by line: timestamps may not decrease, and a repeated one
+/// replaces the pose before it ([`Duplicates`]).
+pub(crate) struct PoseLines<'a> {
+    path: &'a Path,
+    times: Vec<f64>,
+    poses: Vec<Isometry3<f64>>,
+    duplicates: Duplicates,
+}
+
+impl<'a> PoseLines<'a> {
+    pub(crate) fn new(path: &'a Path) -> Self {
+        Self {
+            path,
+            times: Vec::new(),
+            poses: Vec::new(),
+            duplicates: Duplicates::default(),
+        }
+    }
+
+    /// Adds the pose of 1-based `line` at `time` seconds.
+    pub(crate) fn push(
+        &mut self,
+        line: usize,
+        time: f64,
+        pose: Isometry3<f64>,
+    ) -> Result<(), TrajectoryError> {
+        match self.times.last() {
+            Some(&previous) if time < previous => {
+                return Err(TrajectoryError::UnsortedTimestamp {
+                    path: self.path.to_path_buf(),
+                    line,
+                    previous,
+                    timestamp: time,
+                });
+            }
+            Some(&previous) if time == previous => {
+                self.poses.pop();
+                self.times.pop();
+                self.duplicates.lines.push(line);
+            }
+            _ => {}
+        }
+        self.times.push(time);
+        self.poses.push(pose);
+        Ok(())
+    }
+
+    /// The trajectory and the repeats; a file without poses is an error.
+    pub(crate) fn finish(self) -> Result<(Trajectory, Duplicates), TrajectoryError> {
+        if self.times.is_empty() {
+            return Err(TrajectoryError::Empty {
+                path: self.path.to_path_buf(),
+            });
+        }
+        Ok((Trajectory::new(self.times, self.poses)?, self.duplicates))
     }
 }
 

@@ -8,13 +8,15 @@
 //! Reading accepts what evo accepts and a little more: lines starting with `#` and blank lines are
 //! skipped, values are separated by whitespace or by commas, a UTF-8 byte-order mark is ignored.
 //! It is strict where evo is lenient or vague: every problem is reported with the 1-based line
-//! and the file. Quaternions are normalised on reading (as evo's `quaternion_matrix` does).
+//! and the file. Quaternions are normalised on reading (as evo's `quaternion_matrix` does). A
+//! timestamp repeated by the next line keeps the later pose and is counted ([`Duplicates`]);
+//! evo reads such files too.
 
 use std::path::Path;
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
-use super::trajectory::{Trajectory, TrajectoryError};
+use super::trajectory::{Duplicates, PoseLines, Trajectory, TrajectoryError};
 use crate::fs::write_atomic;
 
 /// Column names of a TUM line, in file order.
@@ -33,12 +35,19 @@ pub fn read_tum(path: impl AsRef<Path>) -> Result<Trajectory, TrajectoryError> {
     parse_tum(&text, path)
 }
 
-/// Parses the text of a TUM trajectory file; `path` only names the origin in errors.
+/// Parses the text of a TUM trajectory file; `path` only names the origin in errors. A repeated
+/// timestamp keeps the last pose ([`Duplicates`], returned by [`parse_tum_lines`]).
 pub fn parse_tum(text: &str, path: &Path) -> Result<Trajectory, TrajectoryError> {
+    parse_tum_lines(text, path).map(|(trajectory, _)| trajectory)
+}
+
+/// [`parse_tum`], with the lines whose timestamp repeated the line before.
+pub fn parse_tum_lines(
+    text: &str,
+    path: &Path,
+) -> Result<(Trajectory, Duplicates), TrajectoryError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    let mut timestamps = Vec::new();
-    let mut poses = Vec::new();
-    let mut previous_line = 0;
+    let mut poses = PoseLines::new(path);
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let trimmed = raw.trim();
@@ -77,24 +86,6 @@ pub fn parse_tum(text: &str, path: &Path) -> Result<Trajectory, TrajectoryError>
             *value = parsed;
         }
         let [timestamp, tx, ty, tz, qx, qy, qz, qw] = values;
-        if let Some(&previous) = timestamps.last() {
-            if timestamp == previous {
-                return Err(TrajectoryError::DuplicateTimestamp {
-                    path: path.to_path_buf(),
-                    line,
-                    first_line: previous_line,
-                    timestamp,
-                });
-            }
-            if timestamp < previous {
-                return Err(TrajectoryError::UnsortedTimestamp {
-                    path: path.to_path_buf(),
-                    line,
-                    previous,
-                    timestamp,
-                });
-            }
-        }
         // Hamilton quaternion, real part first in nalgebra, last on disk.
         let q = Quaternion::new(qw, qx, qy, qz);
         let norm = q.norm();
@@ -109,16 +100,9 @@ pub fn parse_tum(text: &str, path: &Path) -> Result<Trajectory, TrajectoryError>
             Translation3::new(tx, ty, tz),
             UnitQuaternion::from_quaternion(q),
         );
-        timestamps.push(timestamp);
-        poses.push(world_from_body);
-        previous_line = line;
+        poses.push(line, timestamp, world_from_body)?;
     }
-    if timestamps.is_empty() {
-        return Err(TrajectoryError::Empty {
-            path: path.to_path_buf(),
-        });
-    }
-    Trajectory::new(timestamps, poses)
+    poses.finish()
 }
 
 /// Formats a timestamp with at least 9 decimals and without loss: Rust's shortest round-trip
@@ -330,16 +314,12 @@ mod tests {
             err,
             TrajectoryError::UnsortedTimestamp { line: 3, .. }
         ));
-        let (err, msg) = error_of("dup.txt", "1 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n");
-        assert!(matches!(
-            err,
-            TrajectoryError::DuplicateTimestamp {
-                line: 2,
-                first_line: 1,
-                ..
-            }
-        ));
-        assert!(msg.contains("expected a unique timestamp"), "{msg}");
+        // A repeated timestamp keeps the later line's pose and is counted.
+        let text = "1 0 0 0 0 0 0 1\n1 5 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n";
+        let (t, duplicates) = parse_tum_lines(text, Path::new("dup.txt")).unwrap();
+        assert_eq!(t.timestamps_secs(), &[1.0, 2.0]);
+        assert_eq!(t.poses()[0].translation.vector.x, 5.0);
+        assert_eq!(duplicates.lines, [2]);
     }
 
     #[test]
