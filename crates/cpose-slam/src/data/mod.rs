@@ -20,6 +20,7 @@ mod scannet;
 mod seven_scenes;
 mod tum;
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use cpose_nerf::DataError;
@@ -426,15 +427,14 @@ fn pose_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
     ))
 }
 
-/// The files of `folder` whose names start with `prefix` and end with one of `extensions`,
-/// sorted by the number in the name (ScanNet's `10.jpg` after `9.jpg`).
+/// The files `<prefix><number>.<ext>` in `folder` (one of `extensions`, any case), by number.
 fn numbered_files(
     folder: &Path,
     prefix: &str,
     extensions: &[&str],
-) -> Result<Vec<PathBuf>, RgbdError> {
+) -> Result<BTreeMap<u64, PathBuf>, RgbdError> {
     let entries = std::fs::read_dir(folder).map_err(|e| RgbdError::io(folder, e))?;
-    let mut found: Vec<(u64, PathBuf)> = Vec::new();
+    let mut found = BTreeMap::new();
     for entry in entries {
         let path = entry.map_err(|e| RgbdError::io(folder, e))?.path();
         let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
@@ -450,11 +450,42 @@ fn numbered_files(
             continue;
         }
         if let Ok(n) = stem.parse::<u64>() {
-            found.push((n, path));
+            found.insert(n, path);
         }
     }
-    found.sort();
-    Ok(found.into_iter().map(|(_, p)| p).collect())
+    Ok(found)
+}
+
+/// Files of several kinds (e.g. `("colour", …)`, `("depth", …)`) paired by frame number, never by
+/// position: every kind must hold a file for every number another kind holds. Returns the
+/// numbers in order with one file per kind; the first gap is an error naming the frame, the file
+/// it has and the kind it lacks.
+fn paired_by_number<const N: usize>(
+    folder: &Path,
+    kinds: [(&str, BTreeMap<u64, PathBuf>); N],
+) -> Result<Vec<(u64, [PathBuf; N])>, RgbdError> {
+    let numbers: BTreeSet<u64> = kinds.iter().flat_map(|(_, m)| m.keys().copied()).collect();
+    let mut frames = Vec::with_capacity(numbers.len());
+    for n in numbers {
+        let found: [Option<&PathBuf>; N] = std::array::from_fn(|k| kinds[k].1.get(&n));
+        if let Some(missing) = found.iter().position(Option::is_none) {
+            let (has, file) = kinds
+                .iter()
+                .zip(&found)
+                .find_map(|((kind, _), f)| f.map(|f| (kind, f)))
+                .map_or(("", String::new()), |(k, f)| (*k, f.display().to_string()));
+            return Err(RgbdError::layout(
+                folder,
+                format!(
+                    "frame {n} has a {has} file ({file}) but no {} file; frames are paired by \
+                     their number, so every frame needs one of each",
+                    kinds[missing].0
+                ),
+            ));
+        }
+        frames.push((n, found.map(|f| f.cloned().unwrap_or_default())));
+    }
+    Ok(frames)
 }
 
 /// A fresh empty folder for one test, removed when it ends.

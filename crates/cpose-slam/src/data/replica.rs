@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     DepthImage, FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, numbered_files,
-    parse_floats, pose_from_rows,
+    paired_by_number, parse_floats, pose_from_rows,
 };
 
 /// Replica's camera in NICE-SLAM's configs: 1200×680, `f = 600`, principal point (599.5, 339.5).
@@ -66,25 +66,23 @@ pub fn read_replica(
              results/depth000000.png, …, traj.txt",
         ));
     }
-    let colors = numbered_files(&results, "frame", &["jpg", "jpeg", "png"])?;
-    let depths = numbered_files(&results, "depth", &["png"])?;
-    if colors.len() != depths.len() {
-        return Err(RgbdError::layout(
-            &results,
-            format!(
-                "{} colour frames (frame*.jpg) but {} depth frames (depth*.png)",
-                colors.len(),
-                depths.len()
+    let files = paired_by_number(
+        &results,
+        [
+            (
+                "colour",
+                numbered_files(&results, "frame", &["jpg", "jpeg", "png"])?,
             ),
-        ));
-    }
-    if colors.is_empty() {
+            ("depth", numbered_files(&results, "depth", &["png"])?),
+        ],
+    )?;
+    if files.is_empty() {
         return Err(RgbdError::layout(
             &results,
             "no frames (frame*.jpg, depth*.png)",
         ));
     }
-    let stored = stored_size(&depths[0])?;
+    let stored = stored_size(&files[0].1[1])?;
     if !(frame_rate.is_finite() && frame_rate > 0.0) {
         return Err(RgbdError::layout(
             root,
@@ -98,33 +96,31 @@ pub fn read_replica(
             REPLICA_DEPTH_SCALE,
         ),
     };
+    // Line k of traj.txt is the pose of frame k.
     let traj = root.join("traj.txt");
     let lines = data_lines(&traj)?;
-    if lines.len() < colors.len() {
+    let last = files[files.len() - 1].0;
+    if (lines.len() as u64) <= last {
         return Err(RgbdError::layout(
             &traj,
             format!(
-                "{} poses for {} frames: the trajectory must have one line per frame",
+                "{} poses for frames up to {last}: the trajectory must have one line per frame",
                 lines.len(),
-                colors.len()
             ),
         ));
     }
-    let mut truth = Vec::with_capacity(colors.len());
-    for (number, line) in lines.iter().take(colors.len()) {
+    let mut truth = Vec::with_capacity(files.len());
+    let mut frames = Vec::with_capacity(files.len());
+    for (n, [color, depth]) in files {
+        let (number, line) = &lines[n as usize];
         let m = parse_floats(&traj, *number, line, 16)?;
         truth.push(pose_from_rows(&m));
-    }
-    let frames = colors
-        .into_iter()
-        .zip(depths)
-        .enumerate()
-        .map(|(i, (color, depth))| FrameFiles {
-            time: i as f64 / frame_rate,
+        frames.push(FrameFiles {
+            time: n as f64 / frame_rate,
             color,
             depth,
-        })
-        .collect();
+        });
+    }
     RgbdSequence::new(
         root,
         &intrinsics,
@@ -334,7 +330,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("traj.txt") && err.contains("2 poses for 3 frames"),
+            err.contains("traj.txt") && err.contains("2 poses for frames up to 2"),
             "{err}"
         );
         // A malformed line names its number.
@@ -363,7 +359,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.contains("2 colour frames") && err.contains("3 depth frames"),
+            err.contains("frame 2 has a depth file")
+                && err.contains("depth000002.png")
+                && err.contains("no colour file"),
             "{err}"
         );
     }

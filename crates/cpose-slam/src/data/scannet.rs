@@ -7,8 +7,8 @@ use std::path::Path;
 
 use super::replica::stored_size;
 use super::{
-    FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, numbered_files, parse_floats,
-    pose_from_rows,
+    FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, numbered_files, paired_by_number,
+    parse_floats, pose_from_rows,
 };
 
 /// The depth camera of NICE-SLAM's ScanNet config (640×480).
@@ -47,39 +47,38 @@ pub fn read_scannet(
              (in the scene folder or its frames/ subfolder)",
         ));
     }
-    let colors = numbered_files(&base.join("color"), "", &["jpg", "jpeg", "png"])?;
-    let depths = numbered_files(&base.join("depth"), "", &["png"])?;
-    let poses = numbered_files(&base.join("pose"), "", &["txt"])?;
-    if colors.is_empty() || colors.len() != depths.len() || colors.len() != poses.len() {
+    let files = paired_by_number(
+        &base,
+        [
+            (
+                "colour",
+                numbered_files(&base.join("color"), "", &["jpg", "jpeg", "png"])?,
+            ),
+            ("depth", numbered_files(&base.join("depth"), "", &["png"])?),
+            ("pose", numbered_files(&base.join("pose"), "", &["txt"])?),
+        ],
+    )?;
+    if files.is_empty() {
         return Err(RgbdError::layout(
             &base,
-            format!(
-                "color/, depth/ and pose/ must hold one file per frame; found {}, {} and {}",
-                colors.len(),
-                depths.len(),
-                poses.len()
-            ),
+            "no frames in color/, depth/ and pose/",
         ));
     }
-    let stored = stored_size(&depths[0])?;
+    let stored = stored_size(&files[0].1[1])?;
     let intrinsics = match base.join("intrinsic/intrinsic_depth.txt") {
         path if path.is_file() => read_matrix_intrinsics(&path, stored)?,
         _ => SCANNET_INTRINSICS,
     };
-    let mut truth = Vec::with_capacity(poses.len());
-    for path in &poses {
-        truth.push(pose_from_rows(&read_matrix(path)?));
-    }
-    let frames = colors
-        .into_iter()
-        .zip(depths)
-        .enumerate()
-        .map(|(i, (color, depth))| FrameFiles {
-            time: i as f64 / SCANNET_FRAME_RATE,
+    let mut truth = Vec::with_capacity(files.len());
+    let mut frames = Vec::with_capacity(files.len());
+    for (n, [color, depth, pose]) in files {
+        truth.push(pose_from_rows(&read_matrix(&pose)?));
+        frames.push(FrameFiles {
+            time: n as f64 / SCANNET_FRAME_RATE,
             color,
             depth,
-        })
-        .collect();
+        });
+    }
     RgbdSequence::new(
         root,
         &intrinsics,
@@ -179,7 +178,7 @@ mod tests {
     }
 
     #[test]
-    fn missing_pose_files_are_reported_with_the_counts() {
+    fn a_frame_without_its_pose_file_is_named() {
         let root = test_dir("scannet-missing");
         for sub in ["color", "depth", "pose"] {
             std::fs::create_dir_all(root.join(sub)).unwrap();
@@ -192,6 +191,33 @@ mod tests {
             .save_png(&root.join("depth/0.png"), 1000.0)
             .unwrap();
         let err = read_scannet(&root, 1.0, 0).unwrap_err().to_string();
-        assert!(err.contains("found 1, 1 and 0"), "{err}");
+        assert!(
+            err.contains("frame 0 has a colour file") && err.contains("no pose file"),
+            "{err}"
+        );
+        // A depth image missing in the middle never shifts the later frames onto it.
+        for n in 1..3 {
+            std::fs::copy(
+                root.join("color/0.jpg"),
+                root.join(format!("color/{n}.jpg")),
+            )
+            .unwrap();
+            std::fs::write(
+                root.join(format!("pose/{n}.txt")),
+                "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n",
+            )
+            .unwrap();
+        }
+        std::fs::write(
+            root.join("pose/0.txt"),
+            "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n",
+        )
+        .unwrap();
+        std::fs::copy(root.join("depth/0.png"), root.join("depth/2.png")).unwrap();
+        let err = read_scannet(&root, 1.0, 0).unwrap_err().to_string();
+        assert!(
+            err.contains("frame 1 has a colour file") && err.contains("no depth file"),
+            "{err}"
+        );
     }
 }
