@@ -31,7 +31,7 @@ use cpose_core::eval::{self, Alignment, RpeDelta, Trajectory, TrajectoryFormat};
 use cpose_core::plot;
 use cpose_core::provenance::{Build, Recorder, Session};
 use cpose_core::registry::{self, TaskInput};
-use cpose_core::run_dir::{RunDir, RunDirOptions};
+use cpose_core::run_dir::{Existing, RunDir, RunDirOptions};
 use cpose_core::study;
 use nalgebra::Isometry3;
 
@@ -231,7 +231,8 @@ struct RunArgs {
     /// Run folder (default: `[run] out_dir`, else `runs/<task>-<YYYYmmdd-HHMMSS>`).
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
-    /// Reuse a non-empty run folder (files with the same names are replaced).
+    /// Replace the earlier run in a non-empty run folder (its files are removed first; a
+    /// folder that holds no run is never cleared).
     #[arg(long)]
     force: bool,
     /// Do not echo the log to stderr and draw no progress bars.
@@ -334,9 +335,17 @@ fn list() -> Result<(), Failure> {
 fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
     registry::check_unique().map_err(|e| Failure::Run(e.into()))?;
     let usage = |e: anyhow::Error| Failure::Usage(e);
-    let (config_path, out, allow_existing) = match (&args.resume, &args.config) {
-        (Some(dir), _) => (dir.join("config.toml"), Some(dir.clone()), true),
-        (None, Some(config)) => (config.clone(), args.out.clone(), args.force),
+    let (config_path, out, existing) = match (&args.resume, &args.config) {
+        (Some(dir), _) => (dir.join("config.toml"), Some(dir.clone()), Existing::Keep),
+        (None, Some(config)) => (
+            config.clone(),
+            args.out.clone(),
+            if args.force {
+                Existing::Replace
+            } else {
+                Existing::Refuse
+            },
+        ),
         (None, None) => unreachable!("clap requires a config unless --resume is given"),
     };
     if args.resume.is_some() && !config_path.is_file() {
@@ -358,7 +367,7 @@ fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
     let options = RunDirOptions {
         out,
         config_out_dir: run_config.out_dir.clone(),
-        allow_existing,
+        existing,
         echo_log: !args.quiet,
     };
     let run_dir = RunDir::create(task.name, &options).map_err(|e| usage(e.into()))?;

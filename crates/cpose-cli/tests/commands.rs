@@ -363,6 +363,55 @@ fn the_synthetic_room_is_never_generated_into_a_folder_it_did_not_write() {
 }
 
 #[test]
+fn config_out_dir_stays_below_the_working_folder_and_force_replaces_only_a_run() {
+    let dir = temp_dir("out-dir");
+    let config = workspace_root().join("configs/trajectory_fit.toml");
+    let quick = [
+        "--set",
+        "run.iterations_scale=0.002",
+        "--set",
+        "run.threads=1",
+        "-q",
+    ];
+    let run = |extra: &[&str]| {
+        let args = [&["run", config.to_str().unwrap()][..], extra, &quick[..]].concat();
+        cpose_in(&dir, &args)
+    };
+    // A relative [run] out_dir is used when there is no --out.
+    let out = run(&["--set", "run.out_dir=\"from-config\""]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("from-config/metrics.json").exists());
+    // One that leaves the working folder is refused, naming --out.
+    let out = run(&["--set", "run.out_dir=\"../escaped\""]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--out"));
+    assert!(!dir.join("../escaped").exists());
+    // --force clears the earlier run first (no stale files), but never a folder without a run.
+    write(&dir.join("from-config"), "stale.txt", "old");
+    let out = run(&["--out", "from-config", "--force"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dir.join("from-config/stale.txt").exists());
+    let mine = dir.join("mine");
+    std::fs::create_dir_all(&mine).unwrap();
+    write(&mine, "notes.txt", "mine");
+    let out = run(&["--out", "mine", "--force"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a run folder"));
+    assert_eq!(
+        std::fs::read_to_string(mine.join("notes.txt")).unwrap(),
+        "mine"
+    );
+}
+
+#[test]
 fn completions_cover_every_command_for_every_shell() {
     for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
         let out = cpose_in(&workspace_root(), &["completions", shell]);

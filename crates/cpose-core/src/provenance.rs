@@ -382,7 +382,7 @@ mod tests {
         let dir = crate::testing::TempDir::new("provenance");
         let options = RunDirOptions {
             out: Some(dir.join("run")),
-            allow_existing: true,
+            existing: crate::run_dir::Existing::Keep,
             ..Default::default()
         };
         let run_dir = RunDir::create("demo", &options).unwrap();

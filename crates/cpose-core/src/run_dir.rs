@@ -5,10 +5,13 @@
 //!
 //! Where it goes: the folder given explicitly (`cpose run --out DIR`), else `[run] out_dir`, else
 //! `runs/<task>-<YYYYmmdd-HHMMSS>` (UTC) in the current directory; missing parents are created.
-//! An explicit or configured folder must be missing or empty unless reuse is allowed
-//! (`cpose run --force`, for resuming), so a run never mixes its files with another's by
-//! accident. A default folder that already exists (two runs in the same second) gets a `-2`,
-//! `-3`, … suffix instead.
+//! An explicit or configured folder must be missing or empty, so a run never mixes its files with
+//! another's by accident: `cpose run --resume` keeps an interrupted run's files
+//! ([`Existing::Keep`]), `cpose run --force` first clears an earlier run's folder
+//! ([`Existing::Replace`]; a folder that holds no run is never cleared, and symbolic links in it
+//! are removed, not followed). `[run] out_dir` must stay below the working folder (no absolute
+//! path, no `..`); only `--out` may point elsewhere. A default folder that already exists (two
+//! runs in the same second) gets a `-2`, `-3`, … suffix instead.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -24,9 +27,21 @@ use crate::fs::write_atomic;
 #[derive(Debug, Error)]
 pub enum RunDirError {
     /// The folder exists and holds files, and reuse was not allowed.
-    #[error("run folder is not empty (pass --force to reuse it): {}", .path.display())]
+    #[error("run folder is not empty (pass --force to replace the earlier run in it): {}", .path.display())]
     NotEmpty {
         /// The folder.
+        path: PathBuf,
+    },
+    /// `--force` on a non-empty folder that holds no earlier run.
+    #[error("not a run folder (no provenance.json or config.toml), so --force does not clear it; choose another --out: {}", .path.display())]
+    NotARun {
+        /// The folder.
+        path: PathBuf,
+    },
+    /// `[run] out_dir` that leaves the working folder.
+    #[error("[run] out_dir must stay below the working folder (no absolute path, no `..`), got {}; pass --out to write elsewhere", .path.display())]
+    OutsideWorkingFolder {
+        /// The configured folder.
         path: PathBuf,
     },
     /// An I/O error on a file or folder.
@@ -56,10 +71,23 @@ pub struct RunDirOptions {
     pub out: Option<PathBuf>,
     /// `[run] out_dir` of the config.
     pub config_out_dir: Option<PathBuf>,
-    /// Reuse a non-empty explicit folder (files with the same names are replaced).
-    pub allow_existing: bool,
+    /// What to do with a non-empty explicit folder.
+    pub existing: Existing,
     /// Echo log lines to stderr as well as to `log.txt`.
     pub echo_log: bool,
+}
+
+/// What [`RunDir::create`] does with an explicit folder that already holds files.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Existing {
+    /// Refuse it ([`RunDirError::NotEmpty`]).
+    #[default]
+    Refuse,
+    /// Keep its files (resuming the run in it).
+    Keep,
+    /// Clear it first if it holds an earlier run (`provenance.json` or `config.toml`), else
+    /// refuse ([`RunDirError::NotARun`]).
+    Replace,
 }
 
 /// An open run folder.
@@ -74,11 +102,28 @@ pub struct RunDir {
 impl RunDir {
     /// Creates (or, if allowed, reuses) the run folder for `task`.
     pub fn create(task: &str, options: &RunDirOptions) -> Result<Self, RunDirError> {
+        if let (None, Some(dir)) = (&options.out, &options.config_out_dir) {
+            let escapes = dir.components().any(|c| {
+                !matches!(
+                    c,
+                    std::path::Component::Normal(_) | std::path::Component::CurDir
+                )
+            });
+            if escapes {
+                return Err(RunDirError::OutsideWorkingFolder { path: dir.clone() });
+            }
+        }
         let explicit = options.out.as_ref().or(options.config_out_dir.as_ref());
         let path = match explicit {
             Some(dir) => {
-                if is_non_empty_dir(dir) && !options.allow_existing {
-                    return Err(RunDirError::NotEmpty { path: dir.clone() });
+                if is_non_empty_dir(dir) {
+                    match options.existing {
+                        Existing::Refuse => {
+                            return Err(RunDirError::NotEmpty { path: dir.clone() });
+                        }
+                        Existing::Keep => {}
+                        Existing::Replace => clear_run_folder(dir)?,
+                    }
                 }
                 dir.clone()
             }
@@ -224,6 +269,36 @@ fn utc_compact(t: SystemTime) -> String {
     format!("{y:04}{mo:02}{d:02}-{h:02}{mi:02}{s:02}")
 }
 
+/// Removes everything in `dir`, an earlier run's folder; symbolic links are removed, never
+/// followed.
+fn clear_run_folder(dir: &Path) -> Result<(), RunDirError> {
+    if !dir.join("provenance.json").is_file() && !dir.join("config.toml").is_file() {
+        return Err(RunDirError::NotARun {
+            path: dir.to_path_buf(),
+        });
+    }
+    let io = |path: &Path, error| RunDirError::Io {
+        what: "clearing the earlier run",
+        path: path.to_path_buf(),
+        error,
+    };
+    for entry in std::fs::read_dir(dir).map_err(|e| io(dir, e))? {
+        let path = entry.map_err(|e| io(dir, e))?.path();
+        // `symlink_metadata` does not follow a link; `remove_dir_all` does not follow links
+        // inside the folders it removes.
+        let is_dir = std::fs::symlink_metadata(&path)
+            .map_err(|e| io(&path, e))?
+            .is_dir();
+        let removed = if is_dir {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.map_err(|e| io(&path, e))?;
+    }
+    Ok(())
+}
+
 /// `YYYY-mm-ddTHH:MM:SS.mmmZ`, for log lines.
 pub(crate) fn utc_iso(t: SystemTime) -> String {
     let (y, mo, d, h, mi, s, ms) = utc_parts(t);
@@ -310,14 +385,14 @@ mod tests {
     }
 
     #[test]
-    fn refuses_non_empty_folder_unless_allowed() {
+    fn refuses_non_empty_folder_keeps_it_to_resume_and_clears_only_a_run_with_force() {
         let dir = temp("reuse");
         std::fs::create_dir_all(&dir).unwrap();
         // Empty: fine.
         RunDir::create(
             "demo",
             &RunDirOptions {
-                config_out_dir: Some(dir.clone()),
+                out: Some(dir.clone()),
                 ..Default::default()
             },
         )
@@ -333,12 +408,54 @@ mod tests {
         .unwrap_err();
         assert!(matches!(e, RunDirError::NotEmpty { .. }), "{e}");
         assert!(e.to_string().contains("--force"), "{e}");
-        let options = RunDirOptions {
+        // --force clears only an earlier run's folder.
+        let replace = RunDirOptions {
             out: Some(dir.clone()),
-            allow_existing: true,
+            existing: Existing::Replace,
             ..Default::default()
         };
-        RunDir::create("demo", &options).unwrap();
+        let e = RunDir::create("demo", &replace).unwrap_err();
+        assert!(matches!(e, RunDirError::NotARun { .. }), "{e}");
+        assert!(dir.join("old.txt").exists());
+        let keep = RunDirOptions {
+            out: Some(dir.clone()),
+            existing: Existing::Keep,
+            ..Default::default()
+        };
+        RunDir::create("demo", &keep).unwrap();
+        assert!(dir.join("old.txt").exists());
+        std::fs::write(dir.join("provenance.json"), "{}").unwrap();
+        #[cfg(unix)]
+        {
+            // A planted link is removed, its target left alone.
+            let outside = temp("outside");
+            std::fs::create_dir_all(&outside).unwrap();
+            std::fs::write(outside.join("keep.txt"), "mine").unwrap();
+            std::os::unix::fs::symlink(&outside, dir.join("link")).unwrap();
+            std::os::unix::fs::symlink(outside.join("keep.txt"), dir.join("metrics.json")).unwrap();
+            RunDir::create("demo", &replace).unwrap();
+            assert_eq!(
+                std::fs::read_to_string(outside.join("keep.txt")).unwrap(),
+                "mine"
+            );
+            std::fs::remove_dir_all(&outside).unwrap();
+        }
+        #[cfg(not(unix))]
+        RunDir::create("demo", &replace).unwrap();
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            0,
+            "stale files are gone"
+        );
+        // [run] out_dir stays below the working folder; --out may go anywhere.
+        for outside in ["../x", "/tmp/x", "a/../../x"] {
+            let options = RunDirOptions {
+                config_out_dir: Some(PathBuf::from(outside)),
+                ..Default::default()
+            };
+            let e = RunDir::create("demo", &options).unwrap_err();
+            assert!(matches!(e, RunDirError::OutsideWorkingFolder { .. }), "{e}");
+        }
         // --out wins over [run] out_dir.
         let other = dir.join("other");
         let options = RunDirOptions {

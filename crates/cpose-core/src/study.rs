@@ -985,7 +985,7 @@ mod tests {
             "demo",
             &RunDirOptions {
                 out: Some(dir.to_owned()),
-                allow_existing: true,
+                existing: crate::run_dir::Existing::Keep,
                 ..Default::default()
             },
         )?;
