@@ -41,8 +41,10 @@ table_network() {
 }
 
 table_rates() {
-    # PoseNet's own rates (prev, the first 200 frames of the walk): translation × rotation.
-    dirs=
+    # PoseNet's own rates (prev, the first 200 frames of the walk): translation × rotation; the
+    # free pose on the same frames for reference.
+    run rates/walk200-baseline "$config" --set 'slam.methods=["baseline"]' --set data.frames=200
+    dirs=$out/rates/walk200-baseline
     for t in 5e-4 1e-3 2e-3; do
         for r in 2.5e-4 5e-4 1e-3; do
             run "rates/walk200-t$t-r$r" "$config" --set 'slam.methods=["prev"]' \
@@ -60,7 +62,7 @@ table_redkitchen() {
     run redkitchen configs/7scenes_redkitchen.toml \
         --set "data.path=\"$data/7scenes/redkitchen_0000_0499\""
     table "Real Kinect frames: 7-Scenes redkitchen 0–499 at 320×240 (configs/7scenes_redkitchen.toml)" \
-        ate_rmse_cm,drift_rmse_cm,rpe_trans_rmse_cm,rpe_rot_rmse_deg,first_lost,mesh_accuracy_cm,mesh_completion,fps \
+        ate_rmse_cm,drift_rmse_cm,rpe_trans_rmse_cm,rpe_rot_rmse_deg,first_lost,mesh_accuracy_cm,mesh_completion,fps,cpu_s \
         "$out/redkitchen"
 }
 
