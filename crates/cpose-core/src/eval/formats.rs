@@ -57,9 +57,10 @@ impl TrajectoryFormat {
         }
     }
 
-    /// The format of the file at `path` with contents `text`: a `.csv` name or a comma-separated
-    /// first data line of at least 8 values whose timestamp is an integer is EuRoC, 12 values
-    /// KITTI, 8 values TUM. Errors (naming the file) when none fits.
+    /// The format of the file at `path` with contents `text`: a `.csv` name, or a comma-separated
+    /// first data line of at least 8 values that starts with an integer of 13 digits or more
+    /// (nanoseconds), is EuRoC; 12 values KITTI; 8 values TUM. Errors (naming the file) when none
+    /// fits.
     pub fn detect(path: &Path, text: &str) -> Result<Self, TrajectoryError> {
         let csv = path
             .extension()
@@ -75,8 +76,9 @@ impl TrajectoryFormat {
             return Ok(if csv { Self::Euroc } else { Self::Tum });
         };
         let comma: Vec<&str> = first.split(',').map(str::trim).collect();
-        let integer_stamp = comma[0].bytes().all(|b| b.is_ascii_digit());
-        if csv || (comma.len() >= 8 && integer_stamp) {
+        // Nanoseconds since the Unix epoch have 19 digits; seconds (TUM) have 10 before a point.
+        let nanosecond_stamp = comma[0].len() >= 13 && comma[0].bytes().all(|b| b.is_ascii_digit());
+        if csv || (comma.len() >= 8 && nanosecond_stamp) {
             return Ok(Self::Euroc);
         }
         match first.split_whitespace().count() {
@@ -500,6 +502,12 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("x.txt") && err.contains("--format"), "{err}");
+        // A comma-separated TUM line with a whole-second stamp stays TUM.
+        let tum = "1,0,0,0,0,0,0,1\n";
+        assert_eq!(
+            TrajectoryFormat::detect(Path::new("t.txt"), tum).unwrap(),
+            TrajectoryFormat::Tum
+        );
         assert!("KITTI".parse::<TrajectoryFormat>().is_ok());
         assert!(
             "kitty"
