@@ -478,9 +478,7 @@ fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
             .with_context(|| args.inputs.context())
             .map_err(Failure::Run)?;
     }
-    let text = if args.inputs.json {
-        serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
-    } else {
+    print_report(args.inputs.json, &report, || {
         format!(
             "matched {} pose pairs (max time difference {} s), alignment {}{}\n\
              rmse   {:.12} m\nmean   {:.12} m\nmedian {:.12} m\nstd    {:.12} m\nmin    {:.12} m\nmax    {:.12} m\n",
@@ -499,6 +497,19 @@ fn eval_ate(args: &AteArgs) -> Result<(), Failure> {
             report.min_m,
             report.max_m,
         )
+    })
+}
+
+/// Prints `report` to stdout as JSON, or as the `text` it gives.
+fn print_report(
+    json: bool,
+    report: &impl serde::Serialize,
+    text: impl FnOnce() -> String,
+) -> Result<(), Failure> {
+    let text = if json {
+        serde_json::to_string_pretty(report).map_err(|e| Failure::Run(e.into()))? + "\n"
+    } else {
+        text()
     };
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
     Ok(())
@@ -528,9 +539,7 @@ fn eval_rpe(args: &RpeArgs) -> Result<(), Failure> {
             .with_context(|| args.inputs.context())
             .map_err(Failure::Run)?;
     }
-    let text = if args.inputs.json {
-        serde_json::to_string_pretty(&report).map_err(|e| Failure::Run(e.into()))? + "\n"
-    } else {
+    print_report(args.inputs.json, &report, || {
         format!(
             "matched {} poses (max time difference {} s), {} pairs {} {} apart, alignment {}\n\
              translation  rmse {:.12} m  mean {:.12} m  median {:.12} m  max {:.12} m\n\
@@ -554,9 +563,7 @@ fn eval_rpe(args: &RpeArgs) -> Result<(), Failure> {
             report.rot_median_deg,
             report.rot_max_deg,
         )
-    };
-    let _ = std::io::stdout().lock().write_all(text.as_bytes());
-    Ok(())
+    })
 }
 
 /// [`eval::read_trajectory`], saying on stderr how many repeated timestamps it dropped.

@@ -448,9 +448,10 @@ mod tests {
             "stale files are gone"
         );
         // [run] out_dir stays below the working folder; --out may go anywhere.
-        for outside in ["../x", "/tmp/x", "a/../../x"] {
+        let absolute = std::env::temp_dir().join("x");
+        for outside in [Path::new("../x"), &absolute, Path::new("a/../../x")] {
             let options = RunDirOptions {
-                config_out_dir: Some(PathBuf::from(outside)),
+                config_out_dir: Some(outside.to_path_buf()),
                 ..Default::default()
             };
             let e = RunDir::create("demo", &options).unwrap_err();

@@ -3,7 +3,7 @@
 //!
 //! ```sh
 //! cargo run --release -p cpose-slam --example rgbd_convert -- \
-//!     7scenes ../shared/data/7scenes/redkitchen_0000_0499 tum /tmp/redkitchen_tum [FRAMES]
+//!     7scenes ../shared/data/7scenes/redkitchen_0000_0499 tum redkitchen_tum [FRAMES]
 //! ```
 //!
 //! Sources: `7scenes`, `replica`, `scannet`, `tum`; destinations: `replica`, `scannet`, `tum`

@@ -17,7 +17,6 @@ use std::path::Path;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 use super::trajectory::{Duplicates, PoseLines, Trajectory, TrajectoryError};
-use crate::fs::write_atomic;
 
 /// Column names of a TUM line, in file order.
 pub const TUM_COLUMNS: [&str; 8] = ["timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw"];
@@ -148,13 +147,9 @@ pub fn to_tum_string(trajectory: &Trajectory) -> String {
     out
 }
 
-/// Writes `trajectory` as a TUM file, atomically (see [`write_atomic`]).
+/// Writes `trajectory` as a TUM file, atomically ([`super::write_trajectory`]).
 pub fn write_tum(path: impl AsRef<Path>, trajectory: &Trajectory) -> Result<(), TrajectoryError> {
-    let path = path.as_ref();
-    write_atomic(path, to_tum_string(trajectory)).map_err(|source| TrajectoryError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
+    super::write_trajectory(path, trajectory, super::TrajectoryFormat::Tum, None)
 }
 
 #[cfg(test)]
