@@ -129,3 +129,13 @@ tables_from() {
     done
     echo "$*"
 }
+
+# run_tables TABLE...: each table's runs and table (the function table_TABLE of the calling
+# script), headed by a line `<!-- table:TABLE -->` by which page.sh replaces one table of a page
+# and keeps the others.
+run_tables() {
+    for t in "$@"; do
+        printf '\n<!-- table:%s -->\n' "$t"
+        "table_$t"
+    done
+}

@@ -68,6 +68,5 @@ table_windows_gyro() {
 }
 
 tables=$(tables_from "synthetic euroc windows_gyro" "$@")
-for t in $tables; do
-    "table_$t"
-done
+# shellcheck disable=SC2086 # one word per table
+run_tables $tables

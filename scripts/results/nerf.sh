@@ -5,11 +5,12 @@
 #
 #   scripts/results/nerf.sh [TABLE...]
 #
-# TABLE is one of hold lego lego_barf grid restarts restarts_grid llff llff_colmap encoding (default:
-# all, in that order). Runs go to runs/results/nerf/TABLE/NAME (common.sh: environment); a
-# finished run is kept and an interrupted one resumed, so the script continues where it stopped.
-# The tables are printed to stdout. The grid is 13 runs of about 15 minutes each on two cores;
-# everything, about 40 runs, takes a day.
+# TABLE is one of hold_fern hold_synthetic lego lego_barf grid restarts restarts_grid llff
+# llff_colmap encoding (default: all, in that order). Runs go to runs/results/nerf/GROUP/NAME
+# (common.sh: environment); a finished run is kept and an interrupted one resumed, so the script
+# continues where it stopped. The tables are printed to stdout. The grid is 13 runs of about 15
+# minutes each on two cores; everything, about 40 runs, takes a day, so a page is usually made a
+# few tables at a time (`scripts/results/page.sh nerf TABLE...` keeps the page's other tables).
 set -eu
 # shellcheck source=common.sh
 . "$(dirname "$0")/common.sh"
@@ -77,23 +78,32 @@ grid_runs() {
 
 grid_metrics=init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db
 
-# The pose hold: from COLMAP's own poses on fern (a control: the poses should stay there) and
-# from the default noise on the built-in scene (RM 30° + TM 10%), without a hold, held for 10% of
-# the steps (until the grid's coarse-to-fine begins) and for 50% (until it ends).
-table_hold() {
+# The pose hold (train.pose_hold): from COLMAP's own poses on fern (a control: the poses should stay
+# there), without a hold and held for 10% of the steps (until the grid's coarse-to-fine begins);
+# and from the default noise on the built-in scene (RM 30° + TM 10%) also held for 50% (until the
+# coarse-to-fine ends).
+table_hold_fern() {
     dirs=
-    for hold in 0 0.1 0.5; do
+    for hold in 0 0.1; do
         run "hold/fern-colmap-hold$hold" "$fern" --set "$fern_data" --set 'noise.kind="none"' \
             --set "train.pose_hold=$hold"
         dirs="$dirs $out/hold/fern-colmap-hold$hold"
     done
+    # shellcheck disable=SC2086
+    table "Fern from COLMAP's poses, held while the field first fits (train.pose_hold)" \
+        init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db \
+        $dirs
+}
+
+table_hold_synthetic() {
+    dirs=
     for hold in 0 0.1 0.5; do
         run "hold/synthetic-hold$hold" "$synthetic" --set 'train.methods=["posenet","barf"]' \
             --set "train.pose_hold=$hold"
         dirs="$dirs $out/hold/synthetic-hold$hold"
     done
     # shellcheck disable=SC2086
-    table "Poses held while the field first fits (train.pose_hold)" \
+    table "The built-in scene at RM 30° + TM 10%, poses held while the field first fits" \
         init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db \
         $dirs
 }
@@ -197,7 +207,6 @@ table_encoding() {
         "$out/$d/f10-c2f"
 }
 
-tables=$(tables_from "hold lego lego_barf grid restarts restarts_grid llff llff_colmap encoding" "$@")
-for t in $tables; do
-    "table_$t"
-done
+tables=$(tables_from "hold_fern hold_synthetic lego lego_barf grid restarts restarts_grid llff llff_colmap encoding" "$@")
+# shellcheck disable=SC2086 # one word per table
+run_tables $tables

@@ -6,8 +6,10 @@
 #   scripts/results/page.sh SETTING [TABLE...]
 #
 # SETTING is planar, trajectory, nerf, events, slam or imu; TABLEs are passed on to its script
-# (default: all its tables; the page then holds only the tables asked for). The environment of
-# common.sh applies.
+# (default: all its tables, which then replace everything between the markers). With TABLEs, only
+# those tables are replaced (each table starts at its line `<!-- table:NAME -->`); the page's other
+# tables stay, and a table new to the page is added at the end. The environment of common.sh
+# applies.
 set -eu
 if [ $# -lt 1 ]; then
     echo "usage: $0 SETTING [TABLE...]" >&2
@@ -32,16 +34,58 @@ fi
 tables=$(mktemp)
 trap 'rm -f "$tables" "$page.tmp"' EXIT
 "$script" "$@" >"$tables"
-awk -v tables="$tables" -v begin="$begin" -v end="$end" '
+# Blocks start at `<!-- table:NAME -->`; with TABLEs the page's blocks of other names are kept.
+partial=$([ $# -gt 0 ] && echo 1 || echo 0)
+awk -v tables="$tables" -v begin="$begin" -v end="$end" -v partial="$partial" '
+    # block(line, kind): files line into the current block of kind "old" or "new".
+    function block(line, kind,    name) {
+        if (line ~ /^<!-- table:[^ ]+ -->$/) {
+            name = line
+            sub(/^<!-- table:/, "", name)
+            sub(/ -->$/, "", name)
+            current[kind] = name
+            order[kind, ++count[kind]] = name
+        }
+        if (current[kind] != "") text[kind, current[kind]] = text[kind, current[kind]] line "\n"
+    }
+    BEGIN {
+        while ((getline line < tables) > 0) block(line, "new")
+    }
     $0 == begin {
         print
-        while ((getline line < tables) > 0) print line
-        print ""
-        skip = 1
+        inside = 1
         next
     }
-    $0 == end { skip = 0 }
-    !skip { print }
+    # emit(t): a block with one blank line after it.
+    function emit(t) {
+        sub(/\n+$/, "\n", t)
+        printf "%s\n", t
+    }
+    $0 == end {
+        if (partial) {
+            print ""
+            for (i = 1; i <= count["old"]; i++) {
+                name = order["old", i]
+                emit((("new", name) in text) ? text["new", name] : text["old", name])
+            }
+            for (i = 1; i <= count["new"]; i++) {
+                name = order["new", i]
+                if (!(("old", name) in text)) emit(text["new", name])
+            }
+        } else {
+            close(tables)
+            while ((getline line < tables) > 0) print line
+            print ""
+        }
+        print
+        inside = 0
+        next
+    }
+    inside {
+        block($0, "old")
+        next
+    }
+    { print }
 ' "$page" >"$page.tmp"
 mv "$page.tmp" "$page"
 echo "$page: tables written" >&2

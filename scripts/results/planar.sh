@@ -40,6 +40,5 @@ table_hold() {
 }
 
 tables=$(tables_from "procedural cat girl hold" "$@")
-for t in $tables; do
-    "table_$t"
-done
+# shellcheck disable=SC2086 # one word per table
+run_tables $tables

@@ -62,7 +62,7 @@ table_redkitchen() {
     run redkitchen configs/7scenes_redkitchen.toml \
         --set "data.path=\"$data/7scenes/redkitchen_0000_0499\""
     table "Real Kinect frames: 7-Scenes redkitchen 0–499 at 320×240 (configs/7scenes_redkitchen.toml)" \
-        ate_rmse_cm,drift_rmse_cm,rpe_trans_rmse_cm,rpe_rot_rmse_deg,first_lost,mesh_accuracy_cm,mesh_completion,fps,cpu_s \
+        ate_rmse_cm,drift_rmse_cm,rpe_trans_rmse_cm,rpe_rot_rmse_deg,first_lost,mesh_accuracy_cm,mesh_completion,fps,tracking_fps,mapping_fps,cpu_s \
         "$out/redkitchen"
 }
 
@@ -93,6 +93,5 @@ table_intrinsic() {
 }
 
 tables=$(tables_from "methods network rates redkitchen budget intrinsic" "$@")
-for t in $tables; do
-    "table_$t"
-done
+# shellcheck disable=SC2086 # one word per table
+run_tables $tables

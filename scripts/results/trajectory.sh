@@ -52,6 +52,5 @@ table_patience() {
 }
 
 tables=$(tables_from "synthetic euroc bands patience" "$@")
-for t in $tables; do
-    "table_$t"
-done
+# shellcheck disable=SC2086 # one word per table
+run_tables $tables

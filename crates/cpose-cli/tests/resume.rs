@@ -55,7 +55,12 @@ fn count(dir: &Path, file: &str) -> usize {
 fn metrics(dir: &Path) -> Value {
     fn strip(v: &mut Value) {
         if let Value::Object(map) = v {
-            map.retain(|k, _| !matches!(k.as_str(), "wall_s" | "cpu_s" | "fps"));
+            map.retain(|k, _| {
+                !matches!(
+                    k.as_str(),
+                    "wall_s" | "cpu_s" | "fps" | "tracking_fps" | "mapping_fps"
+                )
+            });
             map.values_mut().for_each(strip);
         }
     }

@@ -1,8 +1,9 @@
-//! One tracking iteration and one mapping iteration of the `slam` task at its defaults
-//! (`configs/synthetic_room.toml`: the synthetic room at 300×170, the default map of 16 samples
-//! per ray): tracking renders 400 pixels, takes the pose gradient and steps the free pose;
-//! mapping renders 1024 pixels and steps the map's Adam. The map is first trained on frame 0 as
-//! the task does (300 steps), so the field is not empty.
+//! One tracking iteration and one mapping iteration of the `slam` task at its defaults (the
+//! default map of 16 samples per ray), on frames of the synthetic room seen through 7-Scenes'
+//! camera at 320×240, the size of `configs/7scenes_redkitchen.toml`: tracking renders 400 pixels,
+//! takes the pose gradient and steps the free pose; mapping renders 1024 pixels and steps the
+//! map's Adam. The map is first trained on frame 0 as the task does (300 steps), so the field is
+//! not empty.
 //!
 //! `cargo bench -p cpose-slam --bench slam_step -- --warm-up-time 1 --measurement-time 5 --sample-size 20`
 
@@ -11,7 +12,7 @@ use std::path::Path;
 
 use cpose_nerf::camera::PoseGradient;
 use cpose_nerf::field3d::SceneBounds;
-use cpose_slam::data::RgbdFrame;
+use cpose_slam::data::{RgbdFrame, SEVEN_SCENES_INTRINSICS};
 use cpose_slam::map::{MapConfig, NeuralMap};
 use cpose_slam::slam::{MappingConfig, Slam, TrackingConfig, sample_pixels};
 use cpose_slam::synth::{RoomConfig, RoomMotion, render_frame, room_scene};
@@ -22,10 +23,9 @@ use rand_chacha::ChaCha8Rng;
 
 fn bench(c: &mut Criterion) {
     let config = RoomConfig::default();
-    let intrinsics = config.intrinsics();
-    let camera = intrinsics
-        .camera_for(intrinsics.width, intrinsics.height, Path::new("bench"))
-        .expect("Replica's aspect ratio");
+    let camera = SEVEN_SCENES_INTRINSICS
+        .camera_for(320, 240, Path::new("bench"))
+        .expect("7-Scenes' aspect ratio");
     let poses = RoomMotion::from_config(&config)
         .expect("default walk")
         .camera_poses();

@@ -3,6 +3,8 @@
 //! map with a [`PoseModel`], the best-loss pose is kept, and every `mapping.every` frames the map
 //! is trained over a window of keyframes plus the current frame at their estimated poses.
 
+use std::time::Instant;
+
 use cpose_nerf::camera::{PinholeCamera, PoseGradient};
 use cpose_nerf::render::CameraRay;
 use nalgebra::Isometry3;
@@ -118,6 +120,33 @@ pub struct Slam {
     seed: u64,
     pixels: Vec<PixelSample>,
     pose_grads: Vec<PoseGradient>,
+    /// Time spent tracking and mapping so far (kept across a resume).
+    pub timing: StageTimes,
+}
+
+/// Seconds spent in each stage of a run, for the tracking and mapping speeds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimes {
+    /// Seconds tracking frames.
+    pub tracking_s: f64,
+    /// Frames tracked in [`StageTimes::tracking_s`].
+    pub tracked: usize,
+    /// Seconds training the map, over every processed frame (mapping runs every
+    /// [`MappingConfig::every`] frames).
+    pub mapping_s: f64,
+}
+
+impl StageTimes {
+    /// Frames per second of tracking alone.
+    pub fn tracking_fps(&self) -> f64 {
+        self.tracked as f64 / self.tracking_s
+    }
+
+    /// Frames per second of mapping alone: `frames` over the mapping time, so mapping's cost is
+    /// spread over the frames it runs for.
+    pub fn mapping_fps(&self, frames: usize) -> f64 {
+        frames as f64 / self.mapping_s
+    }
 }
 
 impl Slam {
@@ -155,6 +184,7 @@ impl Slam {
             seed,
             pixels: Vec::new(),
             pose_grads: Vec::new(),
+            timing: StageTimes::default(),
         })
     }
 
@@ -195,7 +225,8 @@ impl Slam {
         self.map.mesh(grid, level, observed)
     }
 
-    /// Writes the run's state after its last processed frame: estimates, keyframes, map.
+    /// Writes the run's state after its last processed frame: estimates, keyframes, map, stage
+    /// times.
     pub fn save(&self, w: &mut Writer) {
         w.poses(&self.estimates);
         w.f64s(
@@ -206,6 +237,8 @@ impl Slam {
                 .collect::<Vec<_>>(),
         );
         self.map.save(w);
+        let t = &self.timing;
+        w.f64s(&[t.tracking_s, t.tracked as f64, t.mapping_s]);
     }
 
     /// Restores [`Slam::save`]; `frame(i)` reloads the keyframes' data.
@@ -226,7 +259,16 @@ impl Slam {
             let i = i as usize;
             self.keyframes.push((i, frame(i)?));
         }
-        self.map.load(r)
+        self.map.load(r)?;
+        let [tracking_s, tracked, mapping_s] = r.f64s()?[..] else {
+            anyhow::bail!("checkpoint: expected three stage times");
+        };
+        self.timing = StageTimes {
+            tracking_s,
+            tracked: tracked as usize,
+            mapping_s,
+        };
+        Ok(())
     }
 
     /// A generator for frame `index` and stage `stage`: runs are reproducible frame by frame.
@@ -253,15 +295,20 @@ impl Slam {
             self.bodies.push(start * self.body_from_camera.inverse());
             None
         } else {
+            let started = Instant::now();
             let r = self.track(&frame, index, model)?;
+            self.timing.tracking_s += started.elapsed().as_secs_f64();
+            self.timing.tracked += 1;
             Some(r)
         };
         let is_keyframe = index.is_multiple_of(self.mapping.keyframe_every);
+        let started = Instant::now();
         if index == 0 {
             self.map_window(&frame, index, self.mapping.first_iterations);
         } else if index.is_multiple_of(self.mapping.every) {
             self.map_window(&frame, index, self.mapping.iterations);
         }
+        self.timing.mapping_s += started.elapsed().as_secs_f64();
         if is_keyframe {
             self.keyframes.push((index, frame));
         }
@@ -556,6 +603,18 @@ mod tests {
             error < motion / 2.0,
             "free pose: {error} m vs motion {motion} m"
         );
+        // Every frame after the first was tracked and timed; the times survive a checkpoint.
+        assert_eq!(slam.timing.tracked, 15);
+        assert!(slam.timing.tracking_s > 0.0 && slam.timing.mapping_s > 0.0);
+        let mut w = Writer::new();
+        slam.save(&mut w);
+        let timing = slam.timing;
+        slam.timing = StageTimes::default();
+        let mut r = Reader::from_bytes(Path::new("test"), w.into_bytes()).unwrap();
+        let (config, camera, poses) = walk(16);
+        slam.load(&mut r, |i| Ok(room_frame(&config, &camera, &poses[i], i)))
+            .unwrap();
+        assert_eq!(slam.timing, timing);
         // The map holds real surfaces: its mesh lies on the room's, seen from the first camera.
         let grid = Grid::covering([-3.0, -2.5, 0.0], [3.0, 2.5, 2.8], 0.05).unwrap();
         let mesh = slam.mesh(&grid, 30.0, 0.05);

@@ -263,7 +263,11 @@ struct MethodResult {
     frames: usize,
     lost_frames: usize,
     first_lost: Option<usize>,
+    /// Frames over the run's wall time (tracking, mapping, reading frames, checkpoints).
     fps: f64,
+    /// Tracked frames per second of tracking time, and frames per second of mapping time.
+    tracking_fps: f64,
+    mapping_fps: f64,
     /// The mesh against the true surface seen in the depth images ([`crate::surface`]).
     mesh_accuracy_cm: Option<f64>,
     mesh_completion: Option<f64>,
@@ -721,6 +725,8 @@ pub fn run_methods(
                 lost_frames: lost.len(),
                 first_lost: lost.first().copied(),
                 fps: n as f64 / wall_s,
+                tracking_fps: slam.timing.tracking_fps(),
+                mapping_fps: slam.timing.mapping_fps(n),
                 mesh_accuracy_cm: surface.map(|s| 100.0 * s.accuracy_m),
                 mesh_completion: surface.map(|s| s.completion),
                 extra: model
