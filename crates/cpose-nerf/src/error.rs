@@ -55,6 +55,14 @@ pub enum DataError {
         /// The decoder's error.
         error: ::image::ImageError,
     },
+    /// A JPEG file ends before its last scan's end-of-image marker: a truncated file, which
+    /// the decoder would otherwise fill with grey.
+    #[error("image {}: expected complete JPEG data, got a file that ends inside its image data \
+             (no end-of-image marker after the last scan; truncated?)", .path.display())]
+    ImageTruncated {
+        /// The file.
+        path: PathBuf,
+    },
     /// An image's size differs from the first image's of a dataset.
     #[error("image {}: expected the size of the first image {}, {}×{}, got {}×{}",
         .path.display(), .first.display(), .expected.0, .expected.1, .found.0, .found.1)]

@@ -646,6 +646,11 @@ fn decode(path: &Path) -> Result<::image::DynamicImage, DataError> {
     let format_name = if format == ::image::ImageFormat::Png {
         "PNG"
     } else {
+        if !jpeg_is_complete(&bytes) {
+            return Err(DataError::ImageTruncated {
+                path: path.to_path_buf(),
+            });
+        }
         "JPEG"
     };
     let decoded = ::image::load_from_memory_with_format(&bytes, format).map_err(|error| {
@@ -656,6 +661,18 @@ fn decode(path: &Path) -> Result<::image::DynamicImage, DataError> {
         }
     })?;
     Ok(decoded)
+}
+
+/// Whether JPEG `bytes` hold an end-of-image marker (`FF D9`) after the start of their last scan
+/// (`FF DA`). Scan data never holds `FF D9` (a data byte `FF` is stuffed as `FF 00`), so a file cut
+/// inside its image data has none; data appended after the image (a second image, padding)
+/// keeps its own marker or does not matter.
+fn jpeg_is_complete(bytes: &[u8]) -> bool {
+    let marker = |m: u8| move |w: &[u8]| w == [0xFF, m];
+    let Some(scan) = bytes.windows(2).rposition(marker(0xDA)) else {
+        return false;
+    };
+    bytes[scan..].windows(2).any(marker(0xD9))
 }
 
 #[cfg(test)]
@@ -789,6 +806,15 @@ mod tests {
             (p[0] - 200.0 / 255.0).abs() < 0.02 && (p[2] - 50.0 / 255.0).abs() < 0.02,
             "{p:?}"
         );
+        // Cut inside its image data, the same file is refused (the decoder would fill it).
+        let bytes = std::fs::read(dir.join("flat.png")).unwrap();
+        std::fs::write(dir.join("cut.jpg"), &bytes[..bytes.len() - 40]).unwrap();
+        let err = Image::load(dir.join("cut.jpg")).unwrap_err();
+        assert!(matches!(err, DataError::ImageTruncated { .. }), "{err}");
+        assert!(err.to_string().contains("cut.jpg"), "{err}");
+        // Bytes appended after the end of the image do not matter.
+        std::fs::write(dir.join("padded.jpg"), [&bytes[..], &[0; 16]].concat()).unwrap();
+        assert!(Image::load(dir.join("padded.jpg")).is_ok());
     }
 
     #[test]

@@ -55,7 +55,7 @@ impl DepthImage {
         self.data[y * self.width + x]
     }
 
-    /// Reads a 16-bit (or 8-bit) single-channel PNG whose values are `depth · scale`.
+    /// Reads a 16-bit single-channel PNG whose values are `depth · scale`.
     pub fn load_png(path: &Path, scale: f64) -> Result<Self, RgbdError> {
         Self::load_png_masked(path, scale, None)
     }
@@ -74,12 +74,18 @@ impl DepthImage {
                 .map_err(|e| {
                     RgbdError::format(path, "a 16-bit single-channel depth PNG", e.to_string())
                 })?;
-        let channels = decoded.color().channel_count();
-        if channels != 1 {
+        // 8-bit depth would hold 256 levels; no RGB-D dataset stores it, so it is refused rather
+        // than guessed at.
+        let color = decoded.color();
+        if color != ::image::ColorType::L16 {
+            let channels = color.channel_count();
             return Err(RgbdError::format(
                 path,
-                "a single-channel depth PNG",
-                format!("{channels} channels ({:?})", decoded.color()),
+                "a 16-bit single-channel depth PNG",
+                format!(
+                    "{channels} channel(s) of {} bits",
+                    color.bits_per_pixel() / u16::from(channels)
+                ),
             ));
         }
         let luma = decoded.into_luma16();
@@ -206,7 +212,20 @@ mod tests {
             .unwrap();
         let err = DepthImage::load_png(&path, 1000.0).unwrap_err().to_string();
         assert!(
-            err.contains("rgb.png") && err.contains("single-channel"),
+            err.contains("rgb.png") && err.contains("3 channel(s) of 8 bits"),
+            "{err}"
+        );
+        // 8-bit grey is refused too, not read as 257 times its value.
+        let grey = dir.join("grey8.png");
+        ::image::GrayImage::from_raw(2, 2, vec![10, 20, 30, 40])
+            .unwrap()
+            .save(&grey)
+            .unwrap();
+        let err = DepthImage::load_png(&grey, 1000.0).unwrap_err().to_string();
+        assert!(
+            err.contains("grey8.png")
+                && err.contains("16-bit")
+                && err.contains("1 channel(s) of 8 bits"),
             "{err}"
         );
         let err = DepthImage::load_png(&dir.join("none.png"), 1000.0)

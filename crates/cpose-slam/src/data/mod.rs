@@ -117,6 +117,30 @@ pub struct Intrinsics {
 }
 
 impl Intrinsics {
+    /// `self` if it is a pinhole camera: a size of at least 1×1, positive finite focal lengths
+    /// and a finite principal point; else an error naming `path`, where the values came from.
+    pub fn checked(self, path: &Path) -> Result<Self, RgbdError> {
+        let Self {
+            width,
+            height,
+            fx,
+            fy,
+            cx,
+            cy,
+        } = self;
+        let focal = |f: f64| f.is_finite() && f > 0.0;
+        if width > 0 && height > 0 && focal(fx) && focal(fy) && cx.is_finite() && cy.is_finite() {
+            Ok(self)
+        } else {
+            Err(RgbdError::format(
+                path,
+                "a camera of at least 1×1 pixels with positive focal lengths and a finite \
+                 principal point",
+                format!("{width}×{height}, fx = {fx}, fy = {fy}, cx = {cx}, cy = {cy}"),
+            ))
+        }
+    }
+
     /// The camera of images of `width × height` pixels: the intrinsics scaled by
     /// `width / self.width` and `height / self.height` about the image's corner, in cpose's
     /// continuous pixel coordinates (`c = (c_int + ½)·s`). Errors (naming `path`) unless the
@@ -216,6 +240,12 @@ impl RgbdSequence {
     ) -> Result<Self, RgbdError> {
         if frames.is_empty() {
             return Err(RgbdError::layout(root, "no frames found"));
+        }
+        if !(depth_scale.is_finite() && depth_scale > 0.0) {
+            return Err(RgbdError::layout(
+                root,
+                format!("depth scale {depth_scale} must be a positive number of units per metre"),
+            ));
         }
         if !(resolution > 0.0 && resolution <= 1.0) {
             return Err(RgbdError::layout(

@@ -159,17 +159,23 @@ fn cam_params(root: &Path) -> Result<Option<(Intrinsics, f64)>, RgbdError> {
             )
         })?;
         let c = params.camera;
-        return Ok(Some((
-            Intrinsics {
-                width: c.w,
-                height: c.h,
-                fx: c.fx,
-                fy: c.fy,
-                cx: c.cx,
-                cy: c.cy,
-            },
-            c.scale,
-        )));
+        let intrinsics = Intrinsics {
+            width: c.w,
+            height: c.h,
+            fx: c.fx,
+            fy: c.fy,
+            cx: c.cx,
+            cy: c.cy,
+        }
+        .checked(&path)?;
+        if !(c.scale.is_finite() && c.scale > 0.0) {
+            return Err(RgbdError::format(
+                &path,
+                "a positive depth scale (PNG units per metre)",
+                format!("scale = {}", c.scale),
+            ));
+        }
+        return Ok(Some((intrinsics, c.scale)));
     }
     Ok(None)
 }
@@ -364,5 +370,31 @@ mod tests {
                 && err.contains("no colour file"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn impossible_cameras_and_depth_scales_name_cam_params() {
+        let root = test_dir("replica-bad-camera");
+        small_sequence(&root, 2);
+        let path = root.join("cam_params.json");
+        let good = std::fs::read_to_string(&path).unwrap();
+        let params: serde_json::Value = serde_json::from_str(&good).unwrap();
+        for (key, value, expect) in [
+            ("w", serde_json::json!(0), "0×6"),
+            ("fx", serde_json::json!(-4.0), "fx = -4"),
+            ("scale", serde_json::json!(0.0), "scale = 0"),
+            ("scale", serde_json::json!(-1.0), "scale = -1"),
+        ] {
+            let mut bad = params.clone();
+            bad["camera"][key] = value.clone();
+            std::fs::write(&path, bad.to_string()).unwrap();
+            let err = read_replica(&root, None, 1.0, 30.0)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains("cam_params.json") && err.contains(expect),
+                "{key} = {value}: {err}"
+            );
+        }
     }
 }

@@ -111,23 +111,15 @@ fn read_matrix(path: &Path) -> Result<Vec<f64>, RgbdError> {
 /// Intrinsics from a 4×4 `K` file, for images of `size`.
 fn read_matrix_intrinsics(path: &Path, size: (usize, usize)) -> Result<Intrinsics, RgbdError> {
     let m = read_matrix(path)?;
-    let k = Intrinsics {
+    Intrinsics {
         width: size.0,
         height: size.1,
         fx: m[0],
         fy: m[5],
         cx: m[2],
         cy: m[6],
-    };
-    if [k.fx, k.fy, k.cx, k.cy].iter().all(|v| v.is_finite()) && k.fx > 0.0 && k.fy > 0.0 {
-        Ok(k)
-    } else {
-        Err(RgbdError::format(
-            path,
-            "a camera matrix with positive focal lengths",
-            format!("fx {} fy {} cx {} cy {}", k.fx, k.fy, k.cx, k.cy),
-        ))
     }
+    .checked(path)
 }
 
 #[cfg(test)]

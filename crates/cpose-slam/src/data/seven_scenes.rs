@@ -190,22 +190,15 @@ fn read_intrinsics(path: &Path, size: (usize, usize)) -> Result<Intrinsics, Rgbd
     for (number, line) in &lines {
         k.extend(parse_floats(path, *number, line, 3)?);
     }
-    let (fx, fy, cx, cy) = (k[0], k[4], k[2], k[5]);
-    if !(fx > 0.0 && fy > 0.0 && cx.is_finite() && cy.is_finite()) {
-        return Err(RgbdError::format(
-            path,
-            "positive focal lengths fx, fy and a finite principal point",
-            format!("fx = {fx}, fy = {fy}, cx = {cx}, cy = {cy}"),
-        ));
-    }
-    Ok(Intrinsics {
+    Intrinsics {
         width: size.0,
         height: size.1,
-        fx,
-        fy,
-        cx,
-        cy,
-    })
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+    }
+    .checked(path)
 }
 
 #[cfg(test)]
