@@ -155,6 +155,50 @@ impl Default for RunConfig {
 }
 
 impl RunConfig {
+    /// The most threads a run may ask for (more is a typo, and would abort the process when
+    /// the system refuses to start them).
+    pub const MAX_THREADS: usize = 1024;
+
+    /// The largest `iterations_scale` (a longer run is a typo: raise the task's own counts).
+    pub const MAX_ITERATIONS_SCALE: f64 = 100.0;
+
+    /// Errors name the key and the range it must lie in.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if !(1..=Self::MAX_THREADS).contains(&self.threads) {
+            return Err((
+                "threads",
+                format!(
+                    "threads = {} must lie in 1..={}",
+                    self.threads,
+                    Self::MAX_THREADS
+                ),
+            ));
+        }
+        let scale = self.iterations_scale;
+        if !(scale > 0.0 && scale <= Self::MAX_ITERATIONS_SCALE) {
+            return Err((
+                "iterations_scale",
+                format!(
+                    "iterations_scale = {scale} must be a number in (0, {}]",
+                    Self::MAX_ITERATIONS_SCALE
+                ),
+            ));
+        }
+        if self.report_every == Some(0) {
+            return Err(("report_every", "report_every must be at least 1".into()));
+        }
+        if !(self.checkpoint_secs.is_finite() && self.checkpoint_secs >= 0.0) {
+            return Err((
+                "checkpoint_secs",
+                format!(
+                    "checkpoint_secs = {} must be a finite number ≥ 0",
+                    self.checkpoint_secs
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// `max(1, round(n · iterations_scale))` (0 stays 0): the number of iterations a loop
     /// configured for `n` runs.
     pub fn iterations(&self, n: usize) -> usize {
@@ -196,14 +240,51 @@ impl Config {
         }
     }
 
-    /// Reads `path` and applies `overrides` (each `key.path=value`, see
-    /// [`Config::with_overrides`]).
+    /// Reads `path`, applies `overrides` (each `key.path=value`, see
+    /// [`Config::with_overrides`]) and expands the variables of its strings from the environment
+    /// ([`Config::with_variables`], [`environment_variable`]).
     pub fn load(path: &Path, overrides: &[impl AsRef<str>]) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|error| ConfigError::Read {
             path: path.to_owned(),
             error,
         })?;
-        Self::from_text(path, text).with_overrides(overrides)
+        Self::from_text(path, text)
+            .with_overrides(overrides)?
+            .with_variables(|name| environment_variable(name, path))
+    }
+
+    /// Replaces every `${NAME}` in the document's strings by `lookup(NAME)`, so that a config
+    /// names its data wherever it is run from (`path = "${CPOSE_DATA_DIR}/llff/fern"`). The
+    /// resolved text, which the run folder saves, holds the values, so a resume reads the same
+    /// files. Errors name the key: a variable `lookup` does not know (its message says why) or a
+    /// `${` without a name and a closing `}`.
+    pub fn with_variables(
+        self,
+        lookup: impl Fn(&str) -> Result<String, String>,
+    ) -> Result<Self, ConfigError> {
+        if !self.text.contains("${") {
+            return Ok(self);
+        }
+        let mut doc: DocumentMut = self.text.parse().map_err(|e: toml_edit::TomlError| {
+            self.error_at(e.span().map(|s| s.start), e.to_string().trim_end())
+        })?;
+        let mut failure = None;
+        expand_item(doc.as_item_mut(), "", &mut |key, text| {
+            expand(text, &lookup).map_err(|message| {
+                failure.get_or_insert_with(|| format!("{key}: {message}"));
+            })
+        });
+        if let Some(message) = failure {
+            return Err(ConfigError::At {
+                path: self.path,
+                location: None,
+                message,
+            });
+        }
+        Ok(Self {
+            path: self.path,
+            text: doc.to_string(),
+        })
     }
 
     /// Applies `--set` overrides, each `key.path=value`, in order. The value is parsed as a
@@ -257,13 +338,17 @@ impl Config {
     }
 
     /// The `[run]` table, or its defaults when absent.
+    /// Errors name the key: a typo, a wrong type or a value out of range
+    /// ([`RunConfig::validate`]).
     pub fn run_config(&self) -> Result<RunConfig, ConfigError> {
         let section = self.section("run");
-        if section.exists()? {
-            section.decode()
-        } else {
-            Ok(RunConfig::default())
+        if !section.exists()? {
+            return Ok(RunConfig::default());
         }
+        let run: RunConfig = section.decode()?;
+        run.validate()
+            .map_err(|(key, message)| self.section(&format!("run.{key}")).error(message))?;
+        Ok(run)
     }
 
     /// Decodes the whole document into `T` (which then declares `task` and `run` itself, e.g.
@@ -320,6 +405,111 @@ impl Config {
         value: toml::Spanned<DeValue<'_>>,
     ) -> Result<T, ConfigError> {
         T::deserialize(ValueDeserializer::from(value)).map_err(|e| self.toml_error(e))
+    }
+}
+
+/// The value of `${name}` in the config at `config_path`: `CONFIG_DIR` is the config file's
+/// folder; `CPOSE_DATA_DIR` the shared data folder ([`crate::fs::shared_data_dir`]: the
+/// environment variable, else the folder `../shared/data` beside the workspace cpose was built
+/// in); any other name an environment variable. Folders are made absolute.
+pub fn environment_variable(name: &str, config_path: &Path) -> Result<String, String> {
+    let absolute = |dir: &Path| {
+        std::path::absolute(dir)
+            .map(|d| d.to_string_lossy().into_owned())
+            .map_err(|e| format!("cannot make {} absolute: {e}", dir.display()))
+    };
+    match name {
+        "CONFIG_DIR" => absolute(config_path.parent().unwrap_or(Path::new(""))),
+        "CPOSE_DATA_DIR" => match crate::fs::shared_data_dir() {
+            Some(dir) => absolute(&dir),
+            None => Err(format!(
+                "${{CPOSE_DATA_DIR}}: no shared data folder at {}; set the environment variable \
+                 CPOSE_DATA_DIR to the folder that holds the data (see the README's set-up)",
+                crate::fs::shared_data_candidate().display()
+            )),
+        },
+        _ => std::env::var(name)
+            .map_err(|_| format!("${{{name}}}: no environment variable {name} is set")),
+    }
+}
+
+/// `text` with every `${NAME}` replaced by `lookup(NAME)`.
+fn expand(text: &str, lookup: &impl Fn(&str) -> Result<String, String>) -> Result<String, String> {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(start) = rest.find("${") {
+        out.push_str(&rest[..start]);
+        let after = &rest[start + 2..];
+        let name = after
+            .find('}')
+            .map(|end| &after[..end])
+            .filter(|n| {
+                n.chars()
+                    .next()
+                    .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+                    && n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            })
+            .ok_or_else(|| format!("expected ${{NAME}} (letters, digits, _) in {text:?}"))?;
+        out.push_str(&lookup(name)?);
+        rest = &after[name.len() + 1..];
+    }
+    out.push_str(rest);
+    Ok(out)
+}
+
+/// Calls `f(dotted key, text)` on every string of `item` that holds `${`, replacing it by the
+/// result (left as it is on an error, which `f` records).
+fn expand_item(item: &mut Item, key: &str, f: &mut impl FnMut(&str, &str) -> Result<String, ()>) {
+    match item {
+        Item::Value(value) => expand_value(value, key, f),
+        Item::Table(table) => {
+            for (k, item) in table.iter_mut() {
+                expand_item(item, &join_key(key, &k), f);
+            }
+        }
+        Item::ArrayOfTables(tables) => {
+            for (i, table) in tables.iter_mut().enumerate() {
+                for (k, item) in table.iter_mut() {
+                    expand_item(item, &join_key(&format!("{key}[{i}]"), &k), f);
+                }
+            }
+        }
+        Item::None => {}
+    }
+}
+
+fn expand_value(
+    value: &mut toml_edit::Value,
+    key: &str,
+    f: &mut impl FnMut(&str, &str) -> Result<String, ()>,
+) {
+    match value {
+        toml_edit::Value::String(s) if s.value().contains("${") => {
+            if let Ok(expanded) = f(key, s.value()) {
+                let decor = s.decor().clone();
+                *s = toml_edit::Formatted::new(expanded);
+                *s.decor_mut() = decor;
+            }
+        }
+        toml_edit::Value::Array(array) => {
+            for (i, v) in array.iter_mut().enumerate() {
+                expand_value(v, &format!("{key}[{i}]"), f);
+            }
+        }
+        toml_edit::Value::InlineTable(table) => {
+            for (k, v) in table.iter_mut() {
+                expand_value(v, &join_key(key, &k), f);
+            }
+        }
+        _ => {}
+    }
+}
+
+fn join_key(parent: &str, key: &str) -> String {
+    if parent.is_empty() {
+        key.to_owned()
+    } else {
+        format!("{parent}.{key}")
     }
 }
 
@@ -536,6 +726,29 @@ width = 128
             .unwrap_err();
         assert!(e.to_string().starts_with("x.toml: "), "{e}");
         assert!(e.to_string().contains("missing field `task`"), "{e}");
+    }
+
+    #[test]
+    fn run_config_values_out_of_range_name_their_line() {
+        for (value, expect) in [
+            ("threads = 0", "threads = 0 must lie in 1..=1024"),
+            ("threads = 100000", "threads = 100000 must lie in 1..=1024"),
+            (
+                "iterations_scale = -1.0",
+                "iterations_scale = -1 must be a number in (0, 100]",
+            ),
+            ("iterations_scale = nan", "iterations_scale = NaN must be"),
+            ("iterations_scale = 0.0", "iterations_scale = 0 must be"),
+            ("report_every = 0", "report_every must be at least 1"),
+            ("checkpoint_secs = inf", "checkpoint_secs = inf must be"),
+        ] {
+            let text = format!("task = \"a\"\n[run]\nseed = 1\n{value}\n");
+            let e = Config::from_text("x.toml", text).run_config().unwrap_err();
+            assert_eq!(e.location().map(|l| l.line), Some(4), "{value}: {e}");
+            assert!(e.to_string().contains(expect), "{value}: {e}");
+        }
+        let ok = "task = \"a\"\n[run]\nthreads = 1024\niterations_scale = 0.001\n";
+        assert!(Config::from_text("x.toml", ok).run_config().is_ok());
     }
 
     #[test]
@@ -767,6 +980,61 @@ width = 128
         assert_eq!(
             Location::from_offset("", 3),
             Location { line: 1, column: 1 }
+        );
+    }
+
+    #[test]
+    fn variables_expand_in_every_string_and_keep_the_layout() {
+        let text = "task = \"a\"\n[data]\npath = \"${DATA}/fern\" # the images\nlist = [\"${DATA}\", 3]\n\
+                    inline = { p = \"x${DATA}y\" }\nplain = \"$DATA {x}\"\n";
+        let lookup = |name: &str| match name {
+            "DATA" => Ok("/d".to_owned()),
+            _ => Err(format!("no {name}")),
+        };
+        let c = Config::from_text("x.toml", text)
+            .with_variables(lookup)
+            .unwrap();
+        assert_eq!(
+            c.text(),
+            "task = \"a\"\n[data]\npath = \"/d/fern\" # the images\nlist = [\"/d\", 3]\n\
+             inline = { p = \"x/dy\" }\nplain = \"$DATA {x}\"\n"
+        );
+        // Without a variable the text is left alone, byte for byte.
+        let plain = "task = \"a\"   # as written\n";
+        let c = Config::from_text("x.toml", plain)
+            .with_variables(lookup)
+            .unwrap();
+        assert_eq!(c.text(), plain);
+        // An unknown or malformed variable names the key.
+        let e = Config::from_text("x.toml", "[data]\npath = \"${NOPE}/a\"\n")
+            .with_variables(lookup)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("x.toml") && e.contains("data.path: no NOPE"),
+            "{e}"
+        );
+        for bad in ["${}", "${DATA", "${1A}", "${A-B}"] {
+            let e = Config::from_text("x.toml", format!("[m]\nlist = [1, \"{bad}\"]\n"))
+                .with_variables(lookup)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("m.list[1]: expected ${NAME}"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn config_dir_is_the_config_files_absolute_folder() {
+        let dir = environment_variable("CONFIG_DIR", Path::new("configs/x.toml")).unwrap();
+        assert!(
+            Path::new(&dir).is_absolute() && dir.ends_with("configs"),
+            "{dir}"
+        );
+        let e =
+            environment_variable("CPOSE_SURELY_UNSET_VARIABLE", Path::new("x.toml")).unwrap_err();
+        assert!(
+            e.contains("no environment variable CPOSE_SURELY_UNSET_VARIABLE"),
+            "{e}"
         );
     }
 }

@@ -38,11 +38,16 @@ fn tmp_path(path: &Path) -> PathBuf {
 /// where the workspace root is two levels above this crate's manifest. `None` when that folder does
 /// not exist (a user's machine); callers then skip, saying so.
 pub fn shared_data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("CPOSE_DATA_DIR") {
+    let dir = shared_data_candidate();
+    dir.is_dir().then_some(dir)
+}
+
+/// Where [`shared_data_dir`] looks, whether or not the folder exists.
+pub fn shared_data_candidate() -> PathBuf {
+    match std::env::var_os("CPOSE_DATA_DIR") {
         Some(dir) if !dir.is_empty() => PathBuf::from(dir),
         _ => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"),
-    };
-    dir.is_dir().then_some(dir)
+    }
 }
 
 #[cfg(test)]
