@@ -70,8 +70,12 @@ enum Source {
     Euroc,
 }
 
+/// The most samples (poses or IMU readings) the synthetic source generates: ten million, some
+/// 14 hours at 200 Hz.
+const MAX_SYNTHETIC_SAMPLES: usize = 10_000_000;
+
 /// `[data]`: the trajectory and which of its poses supervise the fit.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct DataConfig {
     /// `"synthetic"`, `"tum"` or `"euroc"`.
@@ -246,13 +250,30 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
     };
     Ok(match data.source {
         Source::Synthetic => {
-            if !(data.duration_secs > 0.0 && data.pose_rate_hz > 0.0 && data.imu_rate_hz > 0.0) {
+            let positive = |v: f64| v.is_finite() && v > 0.0;
+            if !(positive(data.duration_secs)
+                && positive(data.pose_rate_hz)
+                && positive(data.imu_rate_hz))
+            {
                 bail!(
-                    "{}: [data] duration_secs, pose_rate_hz and imu_rate_hz must be positive",
+                    "{}: [data] duration_secs = {}, pose_rate_hz = {} and imu_rate_hz = {} must \
+                     be positive finite numbers",
+                    config.path().display(),
+                    data.duration_secs,
+                    data.pose_rate_hz,
+                    data.imu_rate_hz
+                );
+            }
+            // Sizes are checked before anything is allocated.
+            let samples = data.duration_secs * data.pose_rate_hz.max(data.imu_rate_hz);
+            if samples > MAX_SYNTHETIC_SAMPLES as f64 {
+                bail!(
+                    "{}: [data] duration_secs × the larger of pose_rate_hz and imu_rate_hz is \
+                     {samples:.3e} samples; at most {MAX_SYNTHETIC_SAMPLES} are generated",
                     config.path().display()
                 );
             }
-            let range = TimeRange::new(0.0, data.duration_secs).context("duration")?;
+            let range = TimeRange::new(0.0, data.duration_secs).context("duration_secs")?;
             let motion = SinusoidMotion::<f64>::handheld(range, seed);
             let sample = |rate: f64| -> Vec<f64> {
                 let n = (data.duration_secs * rate).floor() as usize + 1;
@@ -1112,6 +1133,25 @@ mod tests {
         let end = seq.range().end_secs;
         assert!(seq.imu.iter().all(|s| s.t_secs >= 0.0 && s.t_secs <= end));
         assert!(seq.imu.len() > 580);
+    }
+
+    #[test]
+    fn impossible_or_huge_synthetic_sizes_are_refused_before_allocating() {
+        let (config, data) = synthetic(5);
+        for (duration_secs, pose_rate_hz, expect) in [
+            (f64::INFINITY, 50.0, "duration_secs = inf"),
+            (4.0, f64::NAN, "pose_rate_hz = NaN"),
+            (1e12, 50.0, "2.000e14 samples"),
+            (4.0, 1e9, "4.000e9 samples"),
+        ] {
+            let data = DataConfig {
+                duration_secs,
+                pose_rate_hz,
+                ..data.clone()
+            };
+            let e = Sequence::new(&config, &data, 0).err().unwrap().to_string();
+            assert!(e.contains("test.toml: [data]") && e.contains(expect), "{e}");
+        }
     }
 
     #[test]
