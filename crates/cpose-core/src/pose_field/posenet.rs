@@ -120,6 +120,9 @@ impl PoseNetConfig {
         Ok(config)
     }
 
+    /// The most weights [`PoseNetConfig::init`] allocates (fifty million, 200 MB in `f32`).
+    pub const MAX_WEIGHTS: usize = 50_000_000;
+
     /// A PoseNet over `range` with freshly initialised weights: Xavier-uniform (gain 1, bias 0)
     /// for all layers but the last, `U(0, 1e-6)` weights and zero bias for the last; translation
     /// network first, then rotation, from one seeded generator.
@@ -132,6 +135,18 @@ impl PoseNetConfig {
             return invalid(format!(
                 "depth = {} must be ≥ 2 and width = {} ≥ 1",
                 self.depth, self.width
+            ));
+        }
+        // Sizes are checked before the weights are allocated: two networks of about
+        // depth × width² weights each.
+        let weights = 2.0 * self.depth as f64 * self.width as f64 * (self.width as f64 + 1.0);
+        if weights > Self::MAX_WEIGHTS as f64 {
+            return invalid(format!(
+                "depth = {} and width = {} give about {weights:.2e} weights; at most {} \
+                 (the paper's 8 × 256 has about 1e6)",
+                self.depth,
+                self.width,
+                Self::MAX_WEIGHTS
             ));
         }
         if self.skip_layer >= self.depth {
@@ -1195,6 +1210,15 @@ mod tests {
                 bad.init::<f32>(range()),
                 Err(PoseFieldError::Invalid(_))
             ));
+        }
+        // A width of a million is refused before 24 TB of weights are asked for.
+        let huge = PoseNetConfig {
+            width: 1_000_000,
+            ..PoseNetConfig::default()
+        };
+        match huge.init::<f32>(range()) {
+            Err(PoseFieldError::Invalid(m)) => assert!(m.contains("width = 1000000"), "{m}"),
+            other => panic!("{:?}", other.map(|n| n.num_params())),
         }
     }
 
