@@ -27,6 +27,9 @@ const LOCAL: usize = PER_CONTROL * SUPPORT;
 const DEGREE: usize = 3;
 /// Fewest control points of a cubic spline (one segment).
 const MIN_CONTROL_POINTS: usize = DEGREE + 1;
+/// Most control points (checked before they are allocated): a knot every millisecond for 15
+/// minutes.
+const MAX_CONTROL_POINTS: usize = 1_000_000;
 
 /// Number of segments `m = ⌈duration / spacing⌉ ≥ 1` for a requested knot spacing, and so
 /// `m + 3` control points; the actual spacing `duration / m` is at most the requested one.
@@ -41,13 +44,21 @@ fn num_control_points_for_spacing(
     }
     // Tolerate rounding so that an exact divisor gives exactly that many segments.
     let segments = (range.duration_secs() / knot_spacing_secs * (1.0 - 1e-12)).ceil();
+    if segments + DEGREE as f64 > MAX_CONTROL_POINTS as f64 {
+        return Err(PoseFieldError::Invalid(format!(
+            "knot spacing {knot_spacing_secs} s over {} s gives {segments:.3e} segments; at most \
+             {MAX_CONTROL_POINTS} control points",
+            range.duration_secs()
+        )));
+    }
     Ok((segments.max(1.0) as usize) + DEGREE)
 }
 
 fn check_num_control_points(num_control_points: usize) -> Result<(), PoseFieldError> {
-    if num_control_points < MIN_CONTROL_POINTS {
+    if !(MIN_CONTROL_POINTS..=MAX_CONTROL_POINTS).contains(&num_control_points) {
         return Err(PoseFieldError::Invalid(format!(
-            "a cubic B-spline needs at least {MIN_CONTROL_POINTS} control points, got {num_control_points}"
+            "a cubic B-spline has {MIN_CONTROL_POINTS}..={MAX_CONTROL_POINTS} control points, got \
+             {num_control_points}"
         )));
     }
     Ok(())
@@ -153,7 +164,7 @@ pub struct PerDimSplinePoses<S: Real = f32> {
 }
 
 impl<S: Real> PerDimSplinePoses<S> {
-    /// Identity poses with `num_control_points ≥ 4` control points over `range` (the paper's
+    /// Identity poses with `num_control_points` (4 to a million) control points over `range` (the paper's
     /// planar experiment uses 5).
     pub fn new(range: TimeRange, num_control_points: usize) -> Result<Self, PoseFieldError> {
         check_num_control_points(num_control_points)?;
@@ -1236,6 +1247,9 @@ mod tests {
         invalid(LieSplinePoses::<f64>::with_num_knots(range(), 3).map(|_| ()));
         invalid(LieSplinePoses::<f64>::with_knot_spacing(range(), 0.0).map(|_| ()));
         invalid(PerDimSplinePoses::<f64>::with_knot_spacing(range(), f64::NAN).map(|_| ()));
+        // Sizes are refused before anything is allocated.
+        invalid(LieSplinePoses::<f64>::with_knot_spacing(range(), 1e-12).map(|_| ()));
+        invalid(PerDimSplinePoses::<f64>::new(range(), usize::MAX).map(|_| ()));
         // Fewer samples than control points: singular normal equations.
         let poses = [Isometry3::identity(); 3];
         invalid(
