@@ -164,8 +164,8 @@ pub struct PerDimSplinePoses<S: Real = f32> {
 }
 
 impl<S: Real> PerDimSplinePoses<S> {
-    /// Identity poses with `num_control_points` (4 to a million) control points over `range` (the paper's
-    /// planar experiment uses 5).
+    /// Identity poses with `num_control_points` (4 to a million) control points over `range`
+    /// (the paper's planar experiment uses 5).
     pub fn new(range: TimeRange, num_control_points: usize) -> Result<Self, PoseFieldError> {
         check_num_control_points(num_control_points)?;
         let segments = num_control_points - DEGREE;
