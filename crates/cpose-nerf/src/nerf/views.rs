@@ -196,6 +196,10 @@ fn subsample<T: Clone>(items: &[T], every: usize) -> Vec<T> {
     items.iter().step_by(every.max(1)).cloned().collect()
 }
 
+/// The most pixels the synthetic scene renders over all views (a hundred million, 1.2 GB of
+/// colour): 100 views of 1000 × 1000.
+const MAX_SYNTHETIC_PIXELS: usize = 100_000_000;
+
 fn synthetic_views(
     d: &DataConfig,
     orbit: &MonocularOrbit,
@@ -209,6 +213,18 @@ fn synthetic_views(
     let scene = SyntheticScene::object_centric();
     let times = orbit.frame_times();
     let frames = subsample(&times, d.subsample);
+    // Sizes are checked before anything is rendered: every view is kept in memory.
+    let pixels = (frames.len() + d.test_views) as f64 * d.width as f64 * d.height as f64;
+    if pixels > MAX_SYNTHETIC_PIXELS as f64 {
+        bail!(
+            "[data]: {} views of width × height = {} × {} are {pixels:.3e} pixels; at most \
+             {MAX_SYNTHETIC_PIXELS} are rendered (lower width and height, orbit.frames or \
+             data.test_views)",
+            frames.len() + d.test_views,
+            d.width,
+            d.height
+        );
+    }
     let render = |t: &f64| {
         let pose = orbit.world_from_camera(*t);
         (
@@ -497,6 +513,23 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_synthetic_scene_too_large_to_hold_is_refused_before_rendering() {
+        let data = DataConfig {
+            width: 100_000,
+            height: 100_000,
+            ..DataConfig::default()
+        };
+        let e = Views::load(&data, &MonocularOrbit::default(), &RenderConfig::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("width × height = 100000 × 100000") && e.contains("at most"),
+            "{e}"
+        );
+    }
 
     /// The Lego orbit as a sequence: every other view trained on at its own number as its time,
     /// held-out views from between them, and a further split scored beside them.
