@@ -698,8 +698,8 @@ fn every_config_runs_as_a_smoke_test() {
 }
 
 /// The planar study's bad input — an unreadable or corrupt image, an image smaller than the
-/// patch layout, zero patches, a negative learning rate — each ends the run with one line naming
-/// the problem and a non-zero exit, before any training.
+/// patch layout, zero patches, a negative learning rate, a texture too large to allocate — each
+/// ends the run with one line naming the problem and a non-zero exit, before any training.
 #[test]
 fn planar_rejects_bad_input_with_one_clear_line() {
     let dir = temp_dir("planar-bad");
@@ -707,12 +707,17 @@ fn planar_rejects_bad_input_with_one_clear_line() {
     let tiny = dir.join("tiny.png");
     cpose_nerf_image(&tiny, 64, 48);
     let config = workspace_root().join("configs/planar.toml");
-    let cases: [(&str, &[&str], &str); 5] = [
+    let cases: [(&str, &[&str], &str); 6] = [
         ("missing image", &["image.path=missing.jpg"], "missing.jpg"),
         ("corrupt image", &["image.path=corrupt.png"], "corrupt.png"),
         ("small image", &["image.path=tiny.png"], "crop_px"),
         ("zero patches", &["motion.patches=0"], "patches"),
         ("negative rate", &["train.lr_field=-1e-3"], "lr_field"),
+        (
+            "huge texture",
+            &["image.procedural_size=[200000,200000]"],
+            "procedural_size 200000×200000",
+        ),
     ];
     for (name, sets, expected) in cases {
         let mut args = vec!["run", config.to_str().unwrap(), "-q", "--out"];

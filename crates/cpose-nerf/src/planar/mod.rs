@@ -289,9 +289,9 @@ impl Setup {
             ),
             None => {
                 let [w, h] = exp.image.procedural_size;
-                if w < 8 || h < 8 {
+                if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
                     return Err(bad(format!(
-                        "[image] procedural_size {w}×{h} is too small (at least 8×8)"
+                        "[image] procedural_size {w}×{h}: each side must lie in 8..=8192"
                     )));
                 }
                 (
