@@ -45,6 +45,12 @@ const ZIP64_EXTRA_ID: u16 = 0x0001;
 const END_LEN: usize = 22;
 /// Largest comment of the end record (its length field is 16 bits).
 const MAX_COMMENT: usize = u16::MAX as usize;
+/// DEFLATE's largest expansion (a run of one byte: 258 bytes per 2 bits, about 1032 : 1). An
+/// entry that declares more is a forged header, refused before anything is inflated.
+const MAX_DEFLATE_RATIO: u64 = 1032;
+/// The most bytes an archive inflates to in all (8 GiB): sizes are checked before they are
+/// allocated.
+pub const MAX_UNCOMPRESSED: u64 = 8 << 30;
 /// DOS date of 1980-01-01 (`(year − 1980) << 9 | month << 5 | day`).
 const DOS_DATE_1980: u16 = (1 << 5) | 1;
 /// "Version needed to extract" / "made by": 2.0, the version that introduced DEFLATE.
@@ -142,11 +148,19 @@ fn central_directory(r: &Reader<'_>) -> Result<(usize, usize), ZipError> {
     Ok((cd_offset, entries))
 }
 
-/// Reads every entry of a ZIP archive: `(name, uncompressed bytes)` in directory order.
+/// Reads every entry of a ZIP archive: `(name, uncompressed bytes)` in directory order, at most
+/// [`MAX_UNCOMPRESSED`] bytes in all.
 pub fn read_zip(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, ZipError> {
+    read_zip_with_limit(bytes, MAX_UNCOMPRESSED)
+}
+
+/// [`read_zip`] with at most `limit` bytes uncompressed, checked against the declared sizes
+/// before anything is inflated.
+fn read_zip_with_limit(bytes: &[u8], limit: u64) -> Result<Vec<(String, Vec<u8>)>, ZipError> {
     let r = Reader { bytes };
     let (mut at, count) = central_directory(&r)?;
     let mut entries = Vec::with_capacity(count.min(1024));
+    let mut total = 0u64;
     for k in 0..count {
         let what = format!("central header {k}");
         let sig = r.u32(at, &what)?;
@@ -193,6 +207,27 @@ pub fn read_zip(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, ZipError> {
             to_usize(compressed, "compressed size")?,
             &format!("data of {name:?}"),
         )?;
+        if method == 8
+            && size
+                > compressed
+                    .saturating_mul(MAX_DEFLATE_RATIO)
+                    .saturating_add(64)
+        {
+            return Err(zip_err(
+                format!(
+                    "entry {name:?}: an uncompressed size at most {MAX_DEFLATE_RATIO} times its \
+                     {compressed} compressed bytes"
+                ),
+                format!("{size} bytes declared (a forged header)"),
+            ));
+        }
+        total = total.saturating_add(size);
+        if total > limit {
+            return Err(zip_err(
+                format!("an archive of at most {limit} bytes uncompressed"),
+                format!("{total} bytes up to entry {name:?}"),
+            ));
+        }
         let size = to_usize(size, "uncompressed size")?;
         let data = match method {
             0 => raw.to_vec(),
@@ -541,5 +576,33 @@ pub(crate) mod tests {
         let mut bad = bytes.clone();
         bad[cd + 8] = 1;
         assert!(read_zip(&bad).unwrap_err().found.contains("encrypted"));
+        // A header that declares more than DEFLATE can expand to (3.2 GB from a few bytes) is
+        // refused before anything is inflated.
+        let mut bad = bytes.clone();
+        bad[cd + 24..cd + 28].copy_from_slice(&3_200_000_000u32.to_le_bytes());
+        let err = read_zip(&bad).unwrap_err();
+        assert!(
+            err.found.contains("3200000000 bytes declared") && err.expected.contains("x.npy"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn archives_larger_than_the_limit_are_refused_before_inflating() {
+        let data = vec![7u8; 1000];
+        let entry = |name| TestEntry {
+            name,
+            data: &data,
+            deflate: true,
+            zip64: false,
+        };
+        let two = zip_with(&[entry("a.npy"), entry("b.npy")], false);
+        assert_eq!(read_zip_with_limit(&two, 2000).unwrap().len(), 2);
+        let err = read_zip_with_limit(&two, 1999).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "expected an archive of at most 1999 bytes uncompressed, got 2000 bytes up to entry \
+             \"b.npy\""
+        );
     }
 }
