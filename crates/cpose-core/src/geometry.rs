@@ -592,6 +592,37 @@ impl QuatJet {
     }
 }
 
+/// How far `r` is from a rotation: the larger of `‖RᵀR − I‖_F` and `|det R − 1|` (0 for a
+/// rotation, NaN for a non-finite entry). Readers refuse a matrix beyond
+/// [`MAX_ROTATION_DEFECT`] rather than guess the rotation it meant.
+pub fn rotation_defect(r: &Matrix3<f64>) -> f64 {
+    (r.transpose() * r - Matrix3::identity())
+        .norm()
+        .max((r.determinant() - 1.0).abs())
+}
+
+/// The largest [`rotation_defect`] a reader accepts (rounding in files written with 6 or more
+/// digits stays far below it).
+pub const MAX_ROTATION_DEFECT: f64 = 1e-3;
+
+/// The isometry of a row-major 3×4 or 4×4 matrix `m` (its first 12 entries), its rotation block
+/// re-orthonormalised; `Err(defect)` when that block is not within [`MAX_ROTATION_DEFECT`] of a
+/// rotation or an entry is not finite (defect NaN).
+pub fn isometry_from_rows(m: &[f64]) -> Result<Isometry3<f64>, f64> {
+    if m.len() < 12 || m[..12].iter().any(|v| !v.is_finite()) {
+        return Err(f64::NAN);
+    }
+    let r = Matrix3::new(m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]);
+    let defect = rotation_defect(&r);
+    if !(defect <= MAX_ROTATION_DEFECT) {
+        return Err(defect);
+    }
+    Ok(Isometry3::from_parts(
+        Translation3::new(m[3], m[7], m[11]),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r)),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1124,5 +1155,35 @@ mod tests {
         // d/ds ⟨g, (a + s da) ⊗ b⟩ = ⟨g, da ⊗ b⟩ = ⟨ga, da⟩, exactly (linear in a).
         assert!((dot(&g, &da.mul(&b)) - dot(&ga, &da)).abs() < 1e-14);
         assert!((dot(&g, &a.mul(&db)) - dot(&gb, &db)).abs() < 1e-14);
+    }
+
+    #[test]
+    fn isometry_from_rows_refuses_what_is_not_a_rotation() {
+        let pose = Isometry3::from_parts(
+            Translation3::new(1.0, -2.0, 3.0),
+            UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1),
+        );
+        let m = pose.to_homogeneous();
+        let rows: Vec<f64> = (0..4)
+            .flat_map(|r| (0..4).map(move |c| m[(r, c)]))
+            .collect();
+        let back = isometry_from_rows(&rows).unwrap();
+        assert!((back.to_homogeneous() - m).amax() < 1e-12);
+        // Scaled, reflected, sheared or non-finite: refused with the defect.
+        let mut scaled = rows.clone();
+        scaled[0] *= 1.01;
+        assert!(isometry_from_rows(&scaled).unwrap_err() > MAX_ROTATION_DEFECT);
+        let mut reflected = rows.clone();
+        for v in &mut reflected[..3] {
+            *v = -*v;
+        }
+        assert!((isometry_from_rows(&reflected).unwrap_err() - 2.0).abs() < 1e-9);
+        let mut nan = rows.clone();
+        nan[5] = f64::NAN;
+        assert!(isometry_from_rows(&nan).unwrap_err().is_nan());
+        assert!(isometry_from_rows(&rows[..11]).is_err());
+        // Rounding to 6 digits stays well inside the tolerance.
+        let rounded: Vec<f64> = rows.iter().map(|v| (v * 1e6).round() / 1e6).collect();
+        assert!(isometry_from_rows(&rounded).is_ok());
     }
 }

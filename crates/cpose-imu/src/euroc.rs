@@ -8,7 +8,8 @@
 use std::path::{Path, PathBuf};
 
 use cpose_core::Timestamp;
-use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
+use cpose_core::geometry::{MAX_ROTATION_DEFECT, isometry_from_rows};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::DataError;
 
@@ -335,15 +336,16 @@ impl SensorYaml {
                 ));
             }
         };
-        let r = Matrix3::new(
-            values[0], values[1], values[2], values[4], values[5], values[6], values[8], values[9],
-            values[10],
-        );
-        let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
-        Ok(Isometry3::from_parts(
-            Translation3::new(values[3], values[7], values[11]),
-            rotation,
-        ))
+        isometry_from_rows(&values).map_err(|defect| {
+            DataError::parse(
+                &self.path,
+                start,
+                format!(
+                    "expected T_BS with a rotation block (within {MAX_ROTATION_DEFECT} of one), \
+                     got a matrix {defect:.2e} from it"
+                ),
+            )
+        })
     }
 }
 
@@ -408,7 +410,21 @@ mod tests {
         let missing = std::env::temp_dir().join("cpose-does-not-exist.csv");
         let err = read_imu(&missing).unwrap_err().to_string();
         assert!(err.contains("cpose-does-not-exist.csv"), "{err}");
-        for p in [wrong_cols, nan, unsorted] {
+        // A T_BS whose rotation block is scaled is refused, not re-orthonormalised.
+        let yaml = temp_file(
+            "sensor.yaml",
+            "sensor_type: imu\nT_BS:\n  cols: 4\n  rows: 4\n  data: [2.0, 0.0, 0.0, 0.1,\n         \
+             0.0, 1.0, 0.0, 0.0,\n         0.0, 0.0, 1.0, 0.0,\n         0.0, 0.0, 0.0, 1.0]\n",
+        );
+        let err = read_sensor_yaml(&yaml)
+            .and_then(|y| y.t_bs())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("line 2") && err.contains("rotation block") && err.contains("3.00e0"),
+            "{err}"
+        );
+        for p in [wrong_cols, nan, unsorted, yaml] {
             std::fs::remove_file(p).unwrap();
         }
     }

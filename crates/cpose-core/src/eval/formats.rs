@@ -12,7 +12,7 @@
 //!   they come from a separate times file (one number of seconds per line, KITTI odometry's
 //!   `times.txt`), which reading requires and writing may leave out. The rotation is projected
 //!   onto the nearest rotation (the files keep 6–9 digits); a matrix further than
-//!   [`MAX_ROTATION_DEFECT`] from a rotation is an error.
+//!   [`MAX_ROTATION_DEFECT`](crate::geometry::MAX_ROTATION_DEFECT) from a rotation is an error.
 //!
 //! Poses are `world_from_body` in every format.
 
@@ -20,15 +20,12 @@ use std::fmt;
 use std::path::Path;
 use std::str::FromStr;
 
-use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
 use super::trajectory::{Duplicates, PoseLines, Trajectory, TrajectoryError};
 use super::tum::{MIN_QUATERNION_NORM, parse_tum_lines, to_tum_string};
 use crate::fs::write_atomic;
-
-/// Largest `‖RᵀR − I‖_F` (or `|det R − 1|`) accepted for a KITTI rotation before it is
-/// projected onto the nearest rotation.
-pub const MAX_ROTATION_DEFECT: f64 = 1e-3;
+use crate::geometry::isometry_from_rows;
 
 /// The header line written at the top of an EuRoC csv pose file.
 pub const EUROC_HEADER: &str = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []";
@@ -287,22 +284,12 @@ pub fn parse_kitti(text: &str, path: &Path) -> Result<Vec<Isometry3<f64>>, Traje
             });
         }
         let v = numbers(fields, path, line, &KITTI_COLUMNS)?;
-        let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
-        let defect = (r.transpose() * r - Matrix3::identity())
-            .norm()
-            .max((r.determinant() - 1.0).abs());
-        if defect.is_nan() || defect > MAX_ROTATION_DEFECT {
-            return Err(TrajectoryError::NotARotation {
-                path: path.to_path_buf(),
-                line,
-                defect,
-            });
-        }
-        let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
-        poses.push(Isometry3::from_parts(
-            Translation3::new(v[3], v[7], v[11]),
-            rotation,
-        ));
+        let pose = isometry_from_rows(&v).map_err(|defect| TrajectoryError::NotARotation {
+            path: path.to_path_buf(),
+            line,
+            defect,
+        })?;
+        poses.push(pose);
     }
     if poses.is_empty() {
         return Err(TrajectoryError::Empty {

@@ -38,8 +38,8 @@ pub use align::{
 };
 pub use associate::{Association, DEFAULT_MAX_DIFF_SECS, associate, associate_with_offset};
 pub use formats::{
-    EUROC_HEADER, MAX_ROTATION_DEFECT, TrajectoryFormat, parse_euroc, parse_kitti, parse_times,
-    read_trajectory, to_euroc_string, to_kitti_string, write_trajectory,
+    EUROC_HEADER, TrajectoryFormat, parse_euroc, parse_kitti, parse_times, read_trajectory,
+    to_euroc_string, to_kitti_string, write_trajectory,
 };
 pub use metrics::{
     ErrorStats, RpeDelta, RpeErrors, ape_rotation_angle, ape_translation, error_stats,

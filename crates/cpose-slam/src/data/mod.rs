@@ -23,6 +23,7 @@ mod tum;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+use cpose_core::geometry::isometry_from_rows;
 use cpose_nerf::DataError;
 use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::image::Image;
@@ -441,20 +442,9 @@ fn line_path(path: &Path, number: usize) -> PathBuf {
 }
 
 /// A `world_from_camera` from a row-major 4×4 matrix; `None` unless every entry is finite and
-/// the rotation block is orthonormal to 1e-3 (it is re-orthonormalised).
+/// the rotation block is a rotation ([`isometry_from_rows`]).
 fn pose_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
-    if m.len() < 12 || m.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let r = nalgebra::Matrix3::new(m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]);
-    if (r.transpose() * r - nalgebra::Matrix3::identity()).amax() > 1e-3 || r.determinant() <= 0.0 {
-        return None;
-    }
-    let rotation = nalgebra::UnitQuaternion::from_matrix(&r);
-    Some(Isometry3::from_parts(
-        nalgebra::Translation3::new(m[3], m[7], m[11]),
-        rotation,
-    ))
+    isometry_from_rows(m).ok()
 }
 
 /// The files `<prefix><number>.<ext>` in `folder` (one of `extensions`, any case), by number.
