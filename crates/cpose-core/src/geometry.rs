@@ -614,7 +614,7 @@ pub fn isometry_from_rows(m: &[f64]) -> Result<Isometry3<f64>, f64> {
     }
     let r = Matrix3::new(m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]);
     let defect = rotation_defect(&r);
-    if !(defect <= MAX_ROTATION_DEFECT) {
+    if defect.is_nan() || defect > MAX_ROTATION_DEFECT {
         return Err(defect);
     }
     Ok(Isometry3::from_parts(
