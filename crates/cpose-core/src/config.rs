@@ -409,9 +409,9 @@ impl Config {
 }
 
 /// The value of `${name}` in the config at `config_path`: `CONFIG_DIR` is the config file's
-/// folder; `CPOSE_DATA_DIR` the shared data folder ([`crate::fs::shared_data_dir`]: the
-/// environment variable, else the folder `../shared/data` beside the workspace cpose was built
-/// in); any other name an environment variable. Folders are made absolute.
+/// folder, made absolute; `CPOSE_DATA_DIR` the shared data folder, canonical
+/// ([`crate::fs::shared_data_dir`]: the environment variable, else the folder `../shared/data`
+/// beside the workspace cpose was built in); any other name an environment variable.
 pub fn environment_variable(name: &str, config_path: &Path) -> Result<String, String> {
     let absolute = |dir: &Path| {
         std::path::absolute(dir)
@@ -421,7 +421,9 @@ pub fn environment_variable(name: &str, config_path: &Path) -> Result<String, St
     match name {
         "CONFIG_DIR" => absolute(config_path.parent().unwrap_or(Path::new(""))),
         "CPOSE_DATA_DIR" => match crate::fs::shared_data_dir() {
-            Some(dir) => absolute(&dir),
+            Some(dir) => std::fs::canonicalize(&dir)
+                .map(|d| d.to_string_lossy().into_owned())
+                .map_err(|e| format!("cannot resolve {}: {e}", dir.display())),
             None => Err(format!(
                 "${{CPOSE_DATA_DIR}}: no shared data folder at {}; set the environment variable \
                  CPOSE_DATA_DIR to the folder that holds the data (see the README's set-up)",
