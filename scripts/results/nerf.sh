@@ -78,10 +78,9 @@ grid_runs() {
 
 grid_metrics=init_rot_err_deg,rot_err_deg,rot_err_relative_deg,trans_err_su,psnr_db,psnr_refined_db
 
-# The pose hold (train.pose_hold): from COLMAP's own poses on fern (a control: the poses should stay
-# there), without a hold and held for 10% of the steps (until the grid's coarse-to-fine begins);
-# and from the default noise on the built-in scene (RM 30° + TM 10%) also held for 50% (until the
-# coarse-to-fine ends).
+# The pose hold (train.pose_hold), without a hold and held for 10% of the steps (until the grid's
+# coarse-to-fine begins): from COLMAP's own poses on fern (a control: the poses should stay there)
+# and from the default noise on the built-in scene (RM 30° + TM 10%).
 table_hold_fern() {
     dirs=
     for hold in 0 0.1; do
@@ -97,7 +96,7 @@ table_hold_fern() {
 
 table_hold_synthetic() {
     dirs=
-    for hold in 0 0.1 0.5; do
+    for hold in 0 0.1; do
         run "hold/synthetic-hold$hold" "$synthetic" --set 'train.methods=["posenet","barf"]' \
             --set "train.pose_hold=$hold"
         dirs="$dirs $out/hold/synthetic-hold$hold"
