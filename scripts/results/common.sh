@@ -39,8 +39,30 @@ finished() {
     [ -f "$1/study.json" ] && grep -q '"finished": true' "$1/study.json"
 }
 
+# claim DIR: whether this script may make DIR. A script claims a run by creating DIR.claim
+# holding its process id; a claim whose process has ended is taken over. So two copies of one
+# script (`scripts/results/nerf.sh grid` twice) share its runs, each making the runs the other
+# has not claimed.
+claim() {
+    mkdir -p "$(dirname "$1")"
+    if ! mkdir "$1.claim" 2>/dev/null; then
+        claim_pid=$(cat "$1.claim/pid" 2>/dev/null || true)
+        if [ -n "$claim_pid" ] && kill -0 "$claim_pid" 2>/dev/null; then
+            return 1
+        fi
+        echo "$1: claimed by process ${claim_pid:-?}, which has ended; taken over" >&2
+    fi
+    echo $$ >"$1.claim/pid"
+}
+
+# unclaim DIR: gives up the claim on DIR.
+unclaim() {
+    rm -rf "$1.claim"
+}
+
 # run NAME CONFIG [ARGS...]: the run folder $out/NAME made by `cpose run CONFIG ARGS...`. A
-# finished run is kept, an interrupted one resumed (`cpose run --resume`), any other started anew.
+# finished run is kept, an interrupted one resumed (`cpose run --resume`), any other started anew,
+# and one claimed by another script (claim) is left to it.
 run() {
     need_cpose
     run_dir=$out/$1
@@ -48,6 +70,10 @@ run() {
     shift 2
     if finished "$run_dir"; then
         echo "$run_dir: finished, kept" >&2
+        return 0
+    elif ! claim "$run_dir"; then
+        echo "$run_dir: being made by process $claim_pid, left to it" >&2
+        return 0
     elif [ -f "$run_dir/config.toml" ]; then
         echo "$run_dir: resuming" >&2
         "$cpose" run --resume "$run_dir" >&2
@@ -61,6 +87,22 @@ run() {
         echo "$run_dir: cpose run $run_config $*" >&2
         "$cpose" run "$run_config" --out "$run_dir" --force "$@" >&2
     fi
+    unclaim "$run_dir"
+}
+
+# await RUN...: waits until every run folder is finished, while another script makes those it
+# has claimed; fails on a run that is neither finished nor claimed.
+await() {
+    for d in "$@"; do
+        while ! finished "$d"; do
+            await_pid=$(cat "$d.claim/pid" 2>/dev/null || true)
+            if [ -z "$await_pid" ] || ! kill -0 "$await_pid" 2>/dev/null; then
+                echo "$d: not finished and not being made; run the script again" >&2
+                return 1
+            fi
+            sleep 30
+        done
+    done
 }
 
 # made_by RUN...: the commit checked out (and whether it has changes), the commits the runs were
@@ -92,6 +134,7 @@ table() {
     table_metrics=$2
     shift 2
     need_cpose
+    await "$@"
     table_text=$("$cpose" table "$@" --metrics "$table_metrics")
     # The command, run from the runs' common folder when they share one.
     table_parent=$(dirname "$1")
