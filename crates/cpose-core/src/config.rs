@@ -208,11 +208,11 @@ impl RunConfig {
         ((n as f64 * self.iterations_scale).round() as usize).max(1)
     }
 
-    /// Builds rayon's global pool with [`RunConfig::threads`] threads (at least 1). Returns
+    /// Builds rayon's global pool with [`RunConfig::threads`] threads. Returns
     /// `false` when the pool already existed (it cannot be rebuilt; the first size wins).
     pub fn init_thread_pool(&self) -> bool {
         rayon::ThreadPoolBuilder::new()
-            .num_threads(self.threads.max(1))
+            .num_threads(self.threads)
             .build_global()
             .is_ok()
     }

@@ -127,26 +127,11 @@ pub struct Slam {
 /// Seconds spent in each stage of a run, for the tracking and mapping speeds.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StageTimes {
-    /// Seconds tracking frames.
+    /// Seconds tracking frames (every frame after the first).
     pub tracking_s: f64,
-    /// Frames tracked in [`StageTimes::tracking_s`].
-    pub tracked: usize,
     /// Seconds training the map, over every processed frame (mapping runs every
     /// [`MappingConfig::every`] frames).
     pub mapping_s: f64,
-}
-
-impl StageTimes {
-    /// Frames per second of tracking alone.
-    pub fn tracking_fps(&self) -> f64 {
-        self.tracked as f64 / self.tracking_s
-    }
-
-    /// Frames per second of mapping alone: `frames` over the mapping time, so mapping's cost is
-    /// spread over the frames it runs for.
-    pub fn mapping_fps(&self, frames: usize) -> f64 {
-        frames as f64 / self.mapping_s
-    }
 }
 
 impl Slam {
@@ -195,6 +180,17 @@ impl Slam {
         self.body_from_camera = body_from_camera;
     }
 
+    /// Frames per second of tracking alone (every frame after the first is tracked).
+    pub fn tracking_fps(&self) -> f64 {
+        self.estimates.len().saturating_sub(1) as f64 / self.timing.tracking_s
+    }
+
+    /// Frames per second of mapping alone: the processed frames over the mapping time, so
+    /// mapping's cost is spread over the frames it runs for.
+    pub fn mapping_fps(&self) -> f64 {
+        self.estimates.len() as f64 / self.timing.mapping_s
+    }
+
     /// A mesh of the map on `grid` at density `level`, culled to the space the keyframes saw:
     /// a triangle stays if some keyframe sees its centre no more than `margin` metres behind the
     /// measured depth (NICE-SLAM culls its meshes to the cameras' frusta likewise).
@@ -238,7 +234,7 @@ impl Slam {
         );
         self.map.save(w);
         let t = &self.timing;
-        w.f64s(&[t.tracking_s, t.tracked as f64, t.mapping_s]);
+        w.f64s(&[t.tracking_s, t.mapping_s]);
     }
 
     /// Restores [`Slam::save`]; `frame(i)` reloads the keyframes' data.
@@ -260,12 +256,11 @@ impl Slam {
             self.keyframes.push((i, frame(i)?));
         }
         self.map.load(r)?;
-        let [tracking_s, tracked, mapping_s] = r.f64s()?[..] else {
-            anyhow::bail!("checkpoint: expected three stage times");
+        let [tracking_s, mapping_s] = r.f64s()?[..] else {
+            anyhow::bail!("checkpoint: expected two stage times");
         };
         self.timing = StageTimes {
             tracking_s,
-            tracked: tracked as usize,
             mapping_s,
         };
         Ok(())
@@ -298,7 +293,6 @@ impl Slam {
             let started = Instant::now();
             let r = self.track(&frame, index, model)?;
             self.timing.tracking_s += started.elapsed().as_secs_f64();
-            self.timing.tracked += 1;
             Some(r)
         };
         let is_keyframe = index.is_multiple_of(self.mapping.keyframe_every);
@@ -604,8 +598,9 @@ mod tests {
             "free pose: {error} m vs motion {motion} m"
         );
         // Every frame after the first was tracked and timed; the times survive a checkpoint.
-        assert_eq!(slam.timing.tracked, 15);
+        assert_eq!(slam.estimates.len(), 16);
         assert!(slam.timing.tracking_s > 0.0 && slam.timing.mapping_s > 0.0);
+        assert!(slam.tracking_fps().is_finite() && slam.mapping_fps().is_finite());
         let mut w = Writer::new();
         slam.save(&mut w);
         let timing = slam.timing;

@@ -725,8 +725,8 @@ pub fn run_methods(
                 lost_frames: lost.len(),
                 first_lost: lost.first().copied(),
                 fps: n as f64 / wall_s,
-                tracking_fps: slam.timing.tracking_fps(),
-                mapping_fps: slam.timing.mapping_fps(n),
+                tracking_fps: slam.tracking_fps(),
+                mapping_fps: slam.mapping_fps(),
                 mesh_accuracy_cm: surface.map(|s| 100.0 * s.accuracy_m),
                 mesh_completion: surface.map(|s| s.completion),
                 extra: model

@@ -23,7 +23,6 @@ mod tum;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use cpose_core::geometry::isometry_from_rows;
 use cpose_nerf::DataError;
 use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::image::Image;
@@ -439,12 +438,6 @@ fn parse_floats(path: &Path, number: usize, line: &str, n: usize) -> Result<Vec<
 /// `path:number`, to name a line in an error.
 fn line_path(path: &Path, number: usize) -> PathBuf {
     PathBuf::from(format!("{}:{number}", path.display()))
-}
-
-/// A `world_from_camera` from a row-major 4×4 matrix; `None` unless every entry is finite and
-/// the rotation block is a rotation ([`isometry_from_rows`]).
-fn pose_from_rows(m: &[f64]) -> Option<Isometry3<f64>> {
-    isometry_from_rows(m).ok()
 }
 
 /// The files `<prefix><number>.<ext>` in `folder` (one of `extensions`, any case), by number.

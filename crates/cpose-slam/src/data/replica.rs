@@ -12,8 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use super::{
     DepthImage, FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, numbered_files,
-    paired_by_number, parse_floats, pose_from_rows,
+    paired_by_number, parse_floats,
 };
+use cpose_core::geometry::isometry_from_rows;
 
 /// Replica's camera in NICE-SLAM's configs: 1200×680, `f = 600`, principal point (599.5, 339.5).
 pub const REPLICA_INTRINSICS: Intrinsics = Intrinsics {
@@ -114,7 +115,7 @@ pub fn read_replica(
     for (n, [color, depth]) in files {
         let (number, line) = &lines[n as usize];
         let m = parse_floats(&traj, *number, line, 16)?;
-        truth.push(pose_from_rows(&m));
+        truth.push(isometry_from_rows(&m).ok());
         frames.push(FrameFiles {
             time: n as f64 / frame_rate,
             color,

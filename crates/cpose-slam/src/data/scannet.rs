@@ -8,8 +8,9 @@ use std::path::Path;
 use super::replica::stored_size;
 use super::{
     FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, numbered_files, paired_by_number,
-    parse_floats, pose_from_rows,
+    parse_floats,
 };
+use cpose_core::geometry::isometry_from_rows;
 
 /// The depth camera of NICE-SLAM's ScanNet config (640×480).
 pub const SCANNET_INTRINSICS: Intrinsics = Intrinsics {
@@ -72,7 +73,7 @@ pub fn read_scannet(
     let mut truth = Vec::with_capacity(files.len());
     let mut frames = Vec::with_capacity(files.len());
     for (n, [color, depth, pose]) in files {
-        truth.push(pose_from_rows(&read_matrix(&pose)?));
+        truth.push(isometry_from_rows(&read_matrix(&pose)?).ok());
         frames.push(FrameFiles {
             time: n as f64 / SCANNET_FRAME_RATE,
             color,

@@ -12,9 +12,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::replica::stored_size;
-use super::{
-    FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, parse_floats, pose_from_rows,
-};
+use super::{FrameFiles, Intrinsics, RgbdError, RgbdSequence, data_lines, parse_floats};
+use cpose_core::geometry::isometry_from_rows;
 
 /// The camera 7-Scenes publishes for its 640×480 frames.
 pub const SEVEN_SCENES_INTRINSICS: Intrinsics = Intrinsics {
@@ -126,7 +125,7 @@ pub fn read_seven_scenes(
         let color = found.color.ok_or_else(|| missing("color"))?;
         let depth = found.depth.ok_or_else(|| missing("depth"))?;
         let pose = found.pose.ok_or_else(|| missing("pose"))?;
-        truth.push(pose_from_rows(&read_pose(&pose)?));
+        truth.push(isometry_from_rows(&read_pose(&pose)?).ok());
         files.push(FrameFiles {
             time: number as f64 / frame_rate,
             color,
