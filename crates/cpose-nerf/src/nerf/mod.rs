@@ -150,7 +150,9 @@ struct TrainConfig {
     /// BARF and spline: `[start, end]` for their se(3) parameters.
     lr_pose: [f64; 2],
     /// Fraction of the steps during which the poses are held while the field fits the initial
-    /// poses (not in the paper; [`PoseSchedules::hold`]).
+    /// poses (not in the paper; [`PoseSchedules::hold`]). For poses that are nearly right (a
+    /// calibrated capture), not for noisy ones, where the field locks in the initial error
+    /// (`docs/results/nerf.md`, "The pose hold"); 0 by default.
     pose_hold: f64,
     /// Fraction of the steps after the hold over which the pose learning rates ramp up
     /// linearly from 0 ([`PoseSchedules::warmup`]).
