@@ -28,7 +28,9 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use cpose_core::Config;
 use cpose_core::eval::{self, Alignment, RpeDelta, Trajectory, TrajectoryFormat};
+use cpose_core::fs::write_atomic;
 use cpose_core::plot;
+use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::provenance::{Build, Recorder, Session};
 use cpose_core::registry::{self, TaskInput};
 use cpose_core::run_dir::{Existing, RunDir, RunDirOptions};
@@ -76,6 +78,8 @@ enum Command {
     Table(TableArgs),
     /// Convert a trajectory file between the TUM, EuRoC csv and KITTI formats.
     Convert(ConvertArgs),
+    /// Poses (and velocities) of a saved pose field, a run's `field_*.safetensors`, at any times.
+    Query(QueryArgs),
     /// Print the completion script of a shell, e.g. `cpose completions bash > cpose.bash`.
     Completions {
         /// The shell: bash, elvish, fish, powershell or zsh.
@@ -105,6 +109,39 @@ struct ConvertArgs {
     #[arg(long)]
     force: bool,
 }
+
+#[derive(Debug, clap::Args)]
+struct QueryArgs {
+    /// The saved field (`field_<condition>_<method>.safetensors` in a run folder).
+    field: PathBuf,
+    /// Times to sample, seconds, comma-separated (inside the field's time range).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "SECS",
+        required_unless_present = "rate"
+    )]
+    times: Vec<f64>,
+    /// Sample the field's whole time range at this rate instead, Hz.
+    #[arg(long, value_name = "HZ", conflicts_with = "times")]
+    rate: Option<f64>,
+    /// Print velocities too, as CSV: `t,tx,ty,tz,qx,qy,qz,qw,wx,wy,wz,vx,vy,vz` (the body's
+    /// angular velocity in rad/s, the linear velocity in the world in m/s).
+    #[arg(long, conflicts_with = "format")]
+    derivatives: bool,
+    /// Format of the poses: tum, euroc or kitti (default: tum).
+    #[arg(long, value_name = "FORMAT")]
+    format: Option<TrajectoryFormat>,
+    /// Write to FILE instead of stdout (never replaced without --force).
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Replace --out if it exists.
+    #[arg(long, requires = "out")]
+    force: bool,
+}
+
+/// The most samples `cpose query --rate` writes.
+const MAX_QUERY_SAMPLES: f64 = 1e7;
 
 /// How the two trajectories of `cpose eval` are read.
 #[derive(Debug, clap::Args)]
@@ -273,6 +310,7 @@ where
         Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
         Command::Eval(EvalCommand::Rpe(args)) => eval_rpe(&args),
         Command::Convert(args) => convert(&args),
+        Command::Query(args) => query(&args),
         Command::Completions { shell } => {
             let mut command = <Cli as clap::CommandFactory>::command();
             clap_complete::generate(shell, &mut command, "cpose", &mut std::io::stdout());
@@ -621,6 +659,80 @@ fn convert(args: &ConvertArgs) -> Result<(), Failure> {
         trajectory.len(),
         args.output.display()
     );
+    Ok(())
+}
+
+fn query(args: &QueryArgs) -> Result<(), Failure> {
+    let usage = |e: anyhow::Error| Failure::Usage(e);
+    if let Some(out) = &args.out
+        && !args.force
+        && out.exists()
+    {
+        return Err(usage(anyhow::anyhow!(
+            "{} exists; give --force to replace it",
+            out.display()
+        )));
+    }
+    let loaded = SavedPoseField::read(&args.field)
+        .and_then(|saved| saved.load(&args.field))
+        .map_err(usage)?;
+    let range = loaded.field.time_range();
+    let times = match args.rate {
+        Some(hz) => {
+            let samples = (range.duration_secs() * hz).floor() + 1.0;
+            if !(hz > 0.0 && samples <= MAX_QUERY_SAMPLES) {
+                return Err(usage(anyhow::anyhow!(
+                    "--rate {hz}: expected a positive rate giving at most {MAX_QUERY_SAMPLES} \
+                     samples over the field's {range}"
+                )));
+            }
+            (0..samples as usize)
+                .map(|i| range.start_secs + i as f64 / hz)
+                .collect()
+        }
+        None => args.times.clone(),
+    };
+    let samples = loaded
+        .sample(&times)
+        .with_context(|| format!("querying {}", args.field.display()))
+        .map_err(usage)?;
+    let text = if args.derivatives {
+        let mut text = "t,tx,ty,tz,qx,qy,qz,qw,wx,wy,wz,vx,vy,vz\n".to_owned();
+        for s in &samples {
+            let (p, q) = (s.pose.translation.vector, s.pose.rotation.quaternion());
+            let (w, v) = (s.ang_vel_body, s.lin_vel_world);
+            let row = [
+                s.t_secs, p.x, p.y, p.z, q.i, q.j, q.k, q.w, w.x, w.y, w.z, v.x, v.y, v.z,
+            ];
+            let row: Vec<String> = row.iter().map(|x| format!("{x:.9}")).collect();
+            text.push_str(&row.join(","));
+            text.push('\n');
+        }
+        text
+    } else {
+        let trajectory = Trajectory::new(times, samples.iter().map(|s| s.pose).collect())
+            .map_err(|e| Failure::Run(e.into()))?;
+        match args.format.unwrap_or(TrajectoryFormat::Tum) {
+            TrajectoryFormat::Tum => eval::to_tum_string(&trajectory),
+            TrajectoryFormat::Euroc => eval::to_euroc_string(&trajectory),
+            TrajectoryFormat::Kitti => eval::to_kitti_string(&trajectory),
+        }
+    };
+    match &args.out {
+        Some(out) => {
+            write_atomic(out, text)
+                .with_context(|| format!("writing {}", out.display()))
+                .map_err(Failure::Run)?;
+            eprintln!(
+                "cpose: wrote {} samples to {}",
+                samples.len(),
+                out.display()
+            );
+        }
+        None => {
+            let _ = std::io::stdout().lock().write_all(text.as_bytes());
+        }
+    }
     Ok(())
 }
 

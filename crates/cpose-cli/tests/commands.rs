@@ -1076,3 +1076,115 @@ fn events_reads_an_eventnerf_folder() {
     assert!(stderr.contains("events"), "{stderr}");
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }
+
+#[test]
+fn a_fitted_field_is_saved_and_query_reproduces_its_trajectory() {
+    let dir = temp_dir("query");
+    let config = workspace_root().join("configs/trajectory_fit.toml");
+    let out = cpose_in(
+        &dir,
+        &[
+            "run",
+            config.to_str().unwrap(),
+            "--out",
+            "run",
+            "-q",
+            "--set",
+            "run.iterations_scale=0.01",
+            "--set",
+            "fit.imu=[\"none\"]",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = dir.join("run");
+    for method in ["posenet", "spline", "lie_spline"] {
+        let field = run.join(format!("field_none_{method}.safetensors"));
+        let traj = eval::read_tum(run.join(format!("traj_none_{method}.txt"))).unwrap();
+        // The run's trajectory, again from the saved field at its own times.
+        let times: Vec<String> = traj
+            .timestamps_secs()
+            .iter()
+            .map(|t| format!("{t}"))
+            .collect();
+        let out = cpose_in(
+            &dir,
+            &[
+                "query",
+                field.to_str().unwrap(),
+                "--times",
+                &times.join(","),
+            ],
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let queried =
+            eval::parse_tum(&String::from_utf8(out.stdout).unwrap(), Path::new("query")).unwrap();
+        assert_eq!(queried.len(), traj.len(), "{method}");
+        for (a, b) in queried.poses().iter().zip(traj.poses()) {
+            assert!(
+                (a.translation.vector - b.translation.vector).norm() < 1e-6,
+                "{method}"
+            );
+            assert!(a.rotation.angle_to(&b.rotation) < 1e-6, "{method}");
+        }
+    }
+    let field = run.join("field_none_posenet.safetensors");
+    let field = field.to_str().unwrap();
+    // Velocities at 10 Hz over the whole range: 10 s of motion, 101 rows and a header.
+    let out = cpose_in(&dir, &["query", field, "--rate", "10", "--derivatives"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        csv.starts_with("t,tx,ty,tz,qx,qy,qz,qw,wx,wy,wz,vx,vy,vz\n"),
+        "{csv}"
+    );
+    assert_eq!(csv.lines().count(), 102);
+    // A time outside the range: one line naming it and the range.
+    let out = cpose_in(&dir, &["query", field, "--times", "0,99"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("time 99 s is outside"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    // Not a saved field.
+    let bogus = write(&dir, "bogus.safetensors", "not a field");
+    let out = cpose_in(&dir, &["query", bogus.to_str().unwrap(), "--times", "0"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bogus.safetensors: expected a pose field saved by cpose"),
+        "{err}"
+    );
+    // The file is safetensors as Python reads it: the same parameters and metadata.
+    let script = "import sys, json\n\
+        from safetensors import safe_open\n\
+        with safe_open(sys.argv[1], framework='numpy') as f:\n\
+        \x20   p = f.get_tensor('params')\n\
+        \x20   m = f.metadata()\n\
+        print(json.dumps({'n': int(p.shape[0]), 'sum': float(p.astype('float64').sum()), 'format': m['format']}))\n";
+    let out = Command::new("python3")
+        .args(["-c", script, field])
+        .output()
+        .expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let python: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let saved = cpose_core::pose_field::saved::SavedPoseField::read(Path::new(field)).unwrap();
+    assert_eq!(python["n"], saved.params.len());
+    let sum: f64 = saved.params.iter().map(|&p| f64::from(p)).sum();
+    assert!((python["sum"].as_f64().unwrap() - sum).abs() < 1e-9 * sum.abs().max(1.0));
+    assert_eq!(python["format"], "cpose-pose-field/1");
+}

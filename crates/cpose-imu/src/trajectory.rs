@@ -24,6 +24,7 @@ use cpose_core::config::Config;
 use cpose_core::eval::{self, Trajectory};
 use cpose_core::nn::{Adam, Convergence, StopReason, StopRule};
 use cpose_core::plot::{self, Line, Panel, SeriesStyle, TrajectorySeries, YScale};
+use cpose_core::pose_field::saved::{FieldFrame, SavedPoseField};
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
@@ -464,8 +465,15 @@ impl Normalisation {
         Isometry3::from_parts(Translation3::from(p), field_from_world * pose.rotation)
     }
     fn to_world_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        let p = self.world_from_field * (pose.translation.vector * self.scale + self.centre);
-        Isometry3::from_parts(Translation3::from(p), self.world_from_field * pose.rotation)
+        self.frame().to_world(pose)
+    }
+    /// The field's frame in the world, for its saved file: `p_world = R (s p + c)`.
+    fn frame(&self) -> FieldFrame {
+        FieldFrame {
+            rotation: self.world_from_field,
+            translation: self.world_from_field * self.centre,
+            scale: self.scale,
+        }
     }
     /// Gravity in the field's frame.
     fn gravity(&self) -> Vector3<f64> {
@@ -1056,6 +1064,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 let fitted = fit
                     .run(field.as_mut(), mode, iterations, seed, unit)
                     .with_context(|| format!("fitting [fields.{name}] with imu = {mode_key:?}"))?;
+                SavedPoseField::capture(&section, &ctx, norm.frame(), field.as_ref())?
+                    .write(&unit.file("field", "safetensors"))?;
                 let mut out = PoseBatch::default();
                 field.evaluate(&seq.times, Order::Pose, &mut out)?;
                 let all: Vec<Isometry3<f64>> = (0..seq.times.len())

@@ -26,6 +26,7 @@ pub mod composed;
 mod discrete;
 mod lie_dual;
 pub mod posenet;
+pub mod saved;
 pub mod sinusoid;
 mod spline;
 
