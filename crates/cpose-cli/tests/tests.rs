@@ -7,6 +7,8 @@ use cpose_imu as _;
 use cpose_nerf as _;
 use cpose_slam as _;
 
+// The bad-input corpus: every reader and task config fed broken input, one table per family.
+mod bad_input;
 // Runs the built `cpose` binary: listing, and every kind of bad input.
 mod binary;
 // `cpose eval ate`, bad trajectory files, and a smoke run of every committed config.
