@@ -133,6 +133,9 @@ table() {
     table_title=$1
     table_metrics=$2
     shift 2
+    if [ "${tables_pass:-print}" = runs ]; then
+        return 0
+    fi
     need_cpose
     await "$@"
     table_text=$("$cpose" table "$@" --metrics "$table_metrics")
@@ -175,8 +178,14 @@ tables_from() {
 
 # run_tables TABLE...: each table's runs and table (the function table_TABLE of the calling
 # script), headed by a line `<!-- table:TABLE -->` by which page.sh replaces one table of a page
-# and keeps the others.
+# and keeps the others. Every table's runs are made first and the tables printed after, so a
+# second copy of the script goes on to the next table's runs instead of waiting for a table.
 run_tables() {
+    tables_pass=runs
+    for t in "$@"; do
+        "table_$t"
+    done
+    tables_pass=print
     for t in "$@"; do
         printf '\n<!-- table:%s -->\n' "$t"
         "table_$t"
