@@ -334,32 +334,38 @@ fn the_synthetic_room_is_never_generated_into_a_folder_it_did_not_write() {
     let real = dir.join("replica_room");
     std::fs::create_dir_all(&real).unwrap();
     let frame = write(&real, "frame000000.jpg", "the user's own frame");
-    let config = workspace_root().join("configs/synthetic_room.toml");
-    let path = format!("data.path={:?}", real.to_str().unwrap());
-    let out_dir = dir.join("run");
-    let out = cpose_in(
-        &dir,
-        &[
-            "run",
-            config.to_str().unwrap(),
-            "--set",
-            &path,
-            "--out",
-            out_dir.to_str().unwrap(),
-            "-q",
-        ],
-    );
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(
-        err.contains("not written by the synthetic generator"),
-        "{err}"
-    );
-    assert_eq!(
-        std::fs::read_to_string(&frame).unwrap(),
-        "the user's own frame"
-    );
-    assert_eq!(std::fs::read_dir(&real).unwrap().count(), 1);
+    // `slam` generating its data, and `synth_room` writing the dataset.
+    for (config, key) in [
+        ("configs/synthetic_room.toml", "data.path"),
+        ("configs/synth_room.toml", "output.path"),
+    ] {
+        let config = workspace_root().join(config);
+        let path = format!("{key}={:?}", real.to_str().unwrap());
+        let out_dir = dir.join(format!("run-{key}"));
+        let out = cpose_in(
+            &dir,
+            &[
+                "run",
+                config.to_str().unwrap(),
+                "--set",
+                &path,
+                "--out",
+                out_dir.to_str().unwrap(),
+                "-q",
+            ],
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("not written by the synthetic generator"),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(&frame).unwrap(),
+            "the user's own frame"
+        );
+        assert_eq!(std::fs::read_dir(&real).unwrap().count(), 1);
+    }
 }
 
 #[test]

@@ -10,7 +10,8 @@ use cpose_core::study::{Metrics, Study, UnitKey};
 use serde::Deserialize;
 
 use crate::data::read_replica;
-use crate::synth::{RoomConfig, generate_room};
+use crate::synth::RoomConfig;
+use crate::task::ensure_synthetic;
 
 inventory::submit! {
     Task {
@@ -31,7 +32,8 @@ struct Experiment {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Output {
-    /// Folder of the dataset (created; existing frames are overwritten).
+    /// Folder of the dataset: created, or one this generator wrote (kept if it holds the same
+    /// room, else rewritten); any other non-empty folder is refused.
     path: PathBuf,
 }
 
@@ -43,12 +45,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         .columns(&["frames", "width", "height"])
         .run(|unit| {
             let started = Instant::now();
-            unit.set_steps(exp.synthetic.frames);
-            let n = generate_room(&exp.synthetic, &exp.output.path, |i, n| {
-                unit.set_steps(n);
-                unit.set_step(i);
-            })
-            .with_context(|| {
+            // As `slam` generates it: a folder of the same room is kept, one that the generator
+            // did not write is refused (it may hold a real dataset).
+            ensure_synthetic(&exp.synthetic, &exp.output.path, input).with_context(|| {
                 format!(
                     "writing the synthetic room to {}",
                     exp.output.path.display()
@@ -62,8 +61,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 .depth
                 .to_image(0.0, 6.0)
                 .save_png(unit.file("frame0_depth", "png"))?;
+            let n = seq.len();
             unit.log(format_args!(
-                "wrote {n} frames of {}×{} to {} in {:.1} s",
+                "{n} frames of {}×{} in {} ({:.1} s)",
                 seq.camera.width,
                 seq.camera.height,
                 exp.output.path.display(),

@@ -323,7 +323,11 @@ pub fn open_sequence(
 const GENERATOR_VERSION: &str = "synthetic room v1";
 
 /// Generates the synthetic room into `path` unless it already holds this exact configuration.
-fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyhow::Result<()> {
+pub(crate) fn ensure_synthetic(
+    config: &RoomConfig,
+    path: &Path,
+    input: &TaskInput,
+) -> anyhow::Result<()> {
     let recipe = serde_json::json!({
         "generator": GENERATOR_VERSION,
         "synthetic": config,
@@ -335,9 +339,9 @@ fn ensure_synthetic(config: &RoomConfig, path: &Path, input: &TaskInput) -> anyh
 
 /// Runs `generate` (which writes a dataset into `path`, reporting `(frame, frames)` as it goes,
 /// and returns the number of frames) unless `path` already holds what `recipe` describes:
-/// the recipe is recorded in `path/synthetic.json` once every frame is written. A non-empty
-/// folder without that file is refused: it may hold a real dataset, which generating would
-/// overwrite.
+/// the recipe is recorded in `path/synthetic.json` once every frame is written (before, the file
+/// marks the folder as being generated). A non-empty folder without that file is refused: it may
+/// hold a real dataset, which generating would overwrite.
 pub fn ensure_generated(
     path: &Path,
     recipe: &serde_json::Value,
@@ -363,6 +367,12 @@ pub fn ensure_generated(
             path.display()
         );
     }
+    // Claimed before the first frame: a generation killed half-way leaves a folder that is
+    // still the generator's (its stamp does not match, so it is generated again).
+    let pending = serde_json::to_string_pretty(&serde_json::json!({ "generating": recipe }))?;
+    std::fs::create_dir_all(path).with_context(|| format!("creating {}", path.display()))?;
+    cpose_core::fs::write_atomic(&stamp, pending.as_bytes())
+        .with_context(|| format!("writing {}", stamp.display()))?;
     let started = Instant::now();
     let progress = input.progress(frames as u64, "rendering");
     let n = generate(&mut |i, n| {
