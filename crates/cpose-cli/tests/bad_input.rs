@@ -1851,6 +1851,13 @@ fn task_configs() {
             ],
         },
         Case {
+            name: "nerf: rays_per_step = 0",
+            files: &[],
+            args: &["run", NERF, "--set", "train.rays_per_step=0"],
+            code: 1,
+            expect: &["[train] rays_per_step = 0: expected at least 1"],
+        },
+        Case {
             name: "nerf: fov_x_deg = 180",
             files: &[],
             args: &["run", NERF, "--set", "data.fov_x_deg=180"],
@@ -2255,6 +2262,23 @@ fn task_configs() {
             ],
         },
         Case {
+            name: "slam: a mesh voxel whose grid would overflow",
+            files: &[],
+            args: &["run", ROOM, "--set", "mesh.voxel=1e-9"],
+            code: 1,
+            expect: &["[mesh]", "nodes (at most 134217728): choose a larger voxel"],
+        },
+        Case {
+            name: "slam: a mesh voxel of NaN",
+            files: &[],
+            args: &["run", ROOM, "--set", "mesh.voxel=nan"],
+            code: 1,
+            expect: &[
+                "[mesh]",
+                "mesh voxel size must be a positive number, got NaN",
+            ],
+        },
+        Case {
             name: "slam: a radius without a centre",
             files: &[],
             args: &["run", ROOM, "--set", "bounds.radius=-1"],
@@ -2287,7 +2311,7 @@ fn task_configs() {
                 "synthetic.frames=4",
             ],
             code: 1,
-            expect: &["cannot access room.txt/results: Not a directory"],
+            expect: &["room.txt: expected a folder for the synthetic data, found a file"],
         },
         Case {
             name: "slam: data.path holds someone's files",
@@ -2325,9 +2349,14 @@ fn task_configs() {
                 "imu_sim.rate_hz=0",
             ],
             code: 1,
-            expect: &[
-                "room: cannot simulate an IMU at imu_sim.rate_hz = 0 from 8 frames with increasing timestamps",
-            ],
+            expect: &["[imu_sim] rate_hz = 0: expected a rate in (0, 10000] Hz"],
+        },
+        Case {
+            name: "slam_imu: imu_sim.rate_hz = 1e12",
+            files: &[],
+            args: &["run", IMU, "--set", "imu_sim.rate_hz=1e12"],
+            code: 1,
+            expect: &["[imu_sim] rate_hz = 1000000000000: expected a rate in (0, 10000] Hz"],
         },
         Case {
             name: "slam_imu: noise = 3",
@@ -2453,7 +2482,7 @@ fn task_configs() {
             ],
             code: 1,
             expect: &[
-                "writing the synthetic room to room.txt: cannot access room.txt/results: Not a directory",
+                "writing the synthetic room to room.txt: room.txt: expected a folder for the synthetic data, found a file",
             ],
         },
         Case {
@@ -2975,6 +3004,13 @@ fn images_llff_and_blender() {
             expect: &["cannot read scene/poses_bounds.npy: Not a directory"],
         },
         // Blender
+        Case {
+            name: "blender: a factor beyond the images' side",
+            files: &[BLENDER_X, ("scene", S(blender))],
+            args: &["run", "x.toml", "--set", "data.factor=1000000"],
+            code: 1,
+            expect: &["[data] factor = 1000000: expected at most 8, the side of the 8×8 images"],
+        },
         Case {
             name: "blender: truncated JSON",
             files: &[

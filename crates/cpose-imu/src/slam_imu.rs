@@ -101,7 +101,7 @@ enum Bias {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct ImuSimConfig {
-    /// Readings per second (the paper: 200).
+    /// Readings per second (the paper: 200), at most 10 kHz.
     rate_hz: f64,
     /// White noise and bias random walk of EuRoC's ADIS16448 (`sensor.yaml` densities).
     noise: bool,
@@ -323,7 +323,14 @@ fn check_coverage(imu: &[ImuSample], frame_times: &[f64], max_gap: f64) -> anyho
 }
 
 /// Any RGB-D sequence with the IMU simulated from its ground truth (the camera is the body).
+/// The fastest simulated IMU, Hz (real IMUs run at a few hundred to a few thousand).
+const MAX_IMU_RATE_HZ: f64 = 10_000.0;
+
 fn simulated(exp: &Experiment, input: &TaskInput) -> anyhow::Result<ImuRgbd> {
+    let rate_hz = exp.imu_sim.rate_hz;
+    if !(rate_hz > 0.0 && rate_hz <= MAX_IMU_RATE_HZ) {
+        bail!("[imu_sim] rate_hz = {rate_hz}: expected a rate in (0, {MAX_IMU_RATE_HZ}] Hz");
+    }
     let seq = open_sequence(&exp.data, &exp.synthetic, input)?;
     let times = seq.times();
     let poses: Vec<Isometry3<f64>> = seq

@@ -44,16 +44,17 @@ impl Grid {
         if !(voxel > 0.0 && voxel.is_finite()) {
             anyhow::bail!("mesh voxel size must be a positive number, got {voxel}");
         }
-        let mut dims = [0; 3];
+        let mut dims = [0.0; 3];
         for a in 0..3 {
             let extent = max[a] - min[a];
             if !(extent > 0.0 && extent.is_finite()) {
                 anyhow::bail!("mesh box {min:?}..{max:?} is empty along axis {a}");
             }
-            dims[a] = (extent / voxel).ceil() as usize + 1;
+            dims[a] = (extent / voxel).ceil() + 1.0;
         }
-        let nodes = dims.iter().product::<usize>();
-        if nodes > MAX_NODES {
+        // Counted in f64: a tiny voxel must be refused, not overflow the count.
+        let nodes = dims.iter().product::<f64>();
+        if nodes > MAX_NODES as f64 {
             anyhow::bail!(
                 "a {voxel} m mesh grid over {min:?}..{max:?} has {nodes} nodes (at most \
                  {MAX_NODES}): choose a larger voxel"
@@ -62,7 +63,7 @@ impl Grid {
         Ok(Self {
             origin: min,
             voxel,
-            dims,
+            dims: dims.map(|d| d as usize),
         })
     }
 
@@ -543,5 +544,7 @@ mod tests {
         assert!(Grid::covering([0.0; 3], [1.0; 3], 0.0).is_err());
         assert!(Grid::covering([0.0; 3], [1.0, 0.0, 1.0], 0.1).is_err());
         assert!(Grid::covering([0.0; 3], [100.0; 3], 1e-3).is_err());
+        // A voxel so small that its node count would overflow is refused, not wrapped.
+        assert!(Grid::covering([0.0; 3], [1.0; 3], 1e-9).is_err());
     }
 }

@@ -370,6 +370,12 @@ pub fn ensure_generated(
     // Claimed before the first frame: a generation killed half-way leaves a folder that is
     // still the generator's (its stamp does not match, so it is generated again).
     let pending = serde_json::to_string_pretty(&serde_json::json!({ "generating": recipe }))?;
+    if path.exists() && !path.is_dir() {
+        bail!(
+            "{}: expected a folder for the synthetic data, found a file",
+            path.display()
+        );
+    }
     std::fs::create_dir_all(path).with_context(|| format!("creating {}", path.display()))?;
     cpose_core::fs::write_atomic(&stamp, pending.as_bytes())
         .with_context(|| format!("writing {}", stamp.display()))?;
@@ -496,7 +502,8 @@ impl SlamSetup {
         ] {
             *steps = input.run.iterations(*steps).max(1);
         }
-        let mesh = if mesh.voxel > 0.0 {
+        // 0 turns the mesh off; a negative or non-finite size is an error (`Grid::covering`).
+        let mesh = if mesh.voxel != 0.0 {
             let (min, max) = bounds.mesh_box()?;
             let grid = Grid::covering(min, max, mesh.voxel).context("[mesh]")?;
             Some((grid, mesh.level, mesh.margin))

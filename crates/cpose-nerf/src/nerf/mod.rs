@@ -306,6 +306,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         PoseNoise::default()
     };
     noise.validate()?;
+    if exp.train.rays_per_step == 0 {
+        bail!("[train] rays_per_step = 0: expected at least 1");
+    }
     if !(0.0..=1.0).contains(&exp.train.field_restart_until) {
         bail!(
             "[train] field_restart_until = {} must lie in [0, 1] (a fraction of the steps)",

@@ -325,14 +325,22 @@ fn blender_options(d: &DataConfig, split: &str, sequence: bool) -> blender::Blen
     }
 }
 
-/// The dataset downscaled by `factor` (images averaged down, the camera scaled).
-fn downscaled(mut dataset: Dataset, factor: u32) -> Dataset {
+/// The dataset downscaled by `factor` (images averaged down, the camera scaled); a factor
+/// larger than the images' sides is an error.
+fn downscaled(mut dataset: Dataset, factor: u32) -> anyhow::Result<Dataset> {
+    let (w, h) = (dataset.camera.width, dataset.camera.height);
+    if factor as usize > w.min(h) {
+        bail!(
+            "[data] factor = {factor}: expected at most {}, the side of the {w}×{h} images",
+            w.min(h)
+        );
+    }
     if factor > 1 {
         let scale = 1.0 / f64::from(factor);
         dataset.images = dataset.images.iter().map(|i| i.resized(scale)).collect();
         dataset.camera = dataset.camera.scaled(scale);
     }
-    dataset
+    Ok(dataset)
 }
 
 fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result<Views> {
@@ -374,7 +382,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
             downscaled(
                 blender::load_blender(path, &blender_options(d, &d.split, d.sequence))?,
                 d.factor.unwrap_or(1),
-            ),
+            )?,
             (
                 Sampling::Metric {
                     near: 2.0,
@@ -400,7 +408,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         let other = downscaled(
             blender::load_blender(path, &blender_options(d, name, false))?,
             d.factor.unwrap_or(1),
-        );
+        )?;
         let picked = evenly_spaced(other.len(), count);
         Ok(TestViews {
             name: Some(name.to_owned()),
