@@ -125,8 +125,8 @@ struct FitConfig {
     /// A fit has converged when its mean errors on the known poses are within both.
     tolerance_deg: f64,
     tolerance_m: f64,
-    /// Steps between convergence checks; a plateau is a trend of the last `plateau_steps` steps
-    /// that projects a fall below `plateau_rel`. At a plateau the learning rates fall by
+    /// Steps between convergence checks; a plateau is `plateau_steps` without a window whose
+    /// mean loss is `plateau_rel` below the best. At a plateau the learning rates fall by
     /// `lr_factor`, up to `lr_drops` times; the next plateau ends the fit ([`StopRule`]).
     check_every: usize,
     plateau_steps: usize,
@@ -754,12 +754,12 @@ impl Fit<'_> {
             cursor = r.u64()? as usize;
             pose_loss = r.f64()?;
             let state = r.f64s()?;
-            convergence.set_state(&state).with_context(|| {
+            convergence.set_state(state.as_slice().try_into().with_context(|| {
                 format!(
                     "{}: the checkpoint's fit state is corrupt",
                     r.path().display()
                 )
-            })?;
+            })?);
             first = done as usize;
         }
         let g = self.norm.gravity();

@@ -2,18 +2,15 @@
 //! to are within a tolerance, its loss has stopped falling at the lowest rate (a plateau), or
 //! its step budget is spent.
 //!
-//! The loss is averaged over windows of [`StopRule::check_every`] steps. At the end of each
-//! window the caller says whether its own errors are within tolerance; otherwise the window joins
-//! the trend of the last [`StopRule::plateau_steps`] steps: the median of the slopes between every
-//! two of their log mean losses (the Theil–Sen estimate). The loss is on a plateau when that trend
-//! projects a fall of less than [`StopRule::plateau_rel`] over the next `plateau_steps` steps.
-//! A median slope ignores the spikes of a noisy fit (stochastic IMU batches pulling against
-//! the poses), which a comparison with the best window so far does not: a lucky low window would
-//! pass for a plateau while the loss is still falling. At a plateau the learning rates fall by
-//! [`StopRule::lr_factor`] (PyTorch's `ReduceLROnPlateau`), up to [`StopRule::lr_drops`] times,
-//! and the trend starts again; a plateau after the last drop ends the fit. Adam at a fixed rate
-//! keeps jumping around a minimum it cannot settle in; the drops let it settle without a
-//! schedule tied to the step budget.
+//! The loss is averaged over windows of [`StopRule::check_every`] steps, which smooths the
+//! noise of stochastic batches (IMU samples, rays). At the end of each window the caller says
+//! whether its own errors are within tolerance; otherwise the window's mean loss is compared
+//! with the best so far. The loss is on a plateau when no window of the last
+//! [`StopRule::plateau_steps`] steps improved on the best by [`StopRule::plateau_rel`]. At a
+//! plateau the learning rates fall by [`StopRule::lr_factor`] (PyTorch's `ReduceLROnPlateau`),
+//! up to [`StopRule::lr_drops`] times; a plateau after the last drop ends the fit. Adam at a
+//! fixed rate keeps jumping around a minimum it cannot settle in; the drops let it settle
+//! without a schedule tied to the step budget.
 
 use serde::{Deserialize, Serialize};
 
@@ -23,9 +20,10 @@ use serde::{Deserialize, Serialize};
 pub struct StopRule {
     /// Steps per window: the loss is averaged and the tolerance checked once per window.
     pub check_every: usize,
-    /// The steps a trend is taken over (at least one window; 0: never stop on a plateau).
+    /// A plateau: no window of this many steps lowered the best mean loss by `plateau_rel`
+    /// (0: never stop on a plateau).
     pub plateau_steps: usize,
-    /// The relative fall per `plateau_steps` below which the loss is on a plateau, e.g. 0.01.
+    /// The relative improvement that counts, e.g. 0.01 for 1%.
     pub plateau_rel: f64,
     /// The factor the learning rates fall by at a plateau.
     pub lr_factor: f64,
@@ -94,12 +92,12 @@ pub struct Convergence {
     rule: StopRule,
     window_sum: f64,
     window_steps: usize,
+    best: f64,
+    steps_since_best: usize,
     /// Learning-rate drops so far.
     drops: usize,
     /// The mean loss of the last closed window (NaN before the first).
     last_mean: f64,
-    /// `ln` of the mean loss of the windows since the last drop, at most a trend's worth.
-    trend: Vec<f64>,
 }
 
 impl Convergence {
@@ -109,9 +107,10 @@ impl Convergence {
             rule,
             window_sum: 0.0,
             window_steps: 0,
+            best: f64::INFINITY,
+            steps_since_best: 0,
             drops: 0,
             last_mean: f64::NAN,
-            trend: Vec::new(),
         }
     }
 
@@ -127,42 +126,31 @@ impl Convergence {
         self.window_steps >= self.rule.check_every
     }
 
-    /// Windows in a trend: `plateau_steps / check_every`, at least 2.
-    fn trend_windows(&self) -> usize {
-        (self.rule.plateau_steps / self.rule.check_every).max(2)
-    }
-
     /// Closes the window; `within_tolerance` is the caller's own test on the fitted samples.
     /// `Some(reason)` when the fit should stop; at a plateau before the last drop, the rates
-    /// fall ([`Convergence::lr_scale`]) and the trend starts again.
+    /// fall ([`Convergence::lr_scale`]) and the plateau count starts again.
     pub fn check(&mut self, within_tolerance: bool) -> Option<StopReason> {
-        let mean = self.window_sum / self.window_steps.max(1) as f64;
+        let steps = self.window_steps.max(1);
+        let mean = self.window_sum / steps as f64;
         self.last_mean = mean;
         self.window_sum = 0.0;
         self.window_steps = 0;
         if within_tolerance {
             return Some(StopReason::Tolerance);
         }
-        if self.rule.plateau_steps == 0 {
-            return None;
+        if mean < self.best * (1.0 - self.rule.plateau_rel) {
+            self.best = mean;
+            self.steps_since_best = 0;
+        } else {
+            self.best = self.best.min(mean);
+            self.steps_since_best += steps;
         }
-        let windows = self.trend_windows();
-        if self.trend.len() == windows {
-            self.trend.remove(0);
-        }
-        // A zero loss cannot fall further: ln 0 = −∞ reads as flat.
-        self.trend.push(mean.max(f64::MIN_POSITIVE).ln());
-        if self.trend.len() < windows {
-            return None;
-        }
-        // Projected fall of ln L over `windows` windows: −slope · windows ≈ relative fall.
-        let fall = -theil_sen_slope(&self.trend) * windows as f64;
-        if fall >= -(1.0 - self.rule.plateau_rel).ln() {
+        if self.rule.plateau_steps == 0 || self.steps_since_best < self.rule.plateau_steps {
             return None;
         }
         if self.drops < self.rule.lr_drops {
             self.drops += 1;
-            self.trend.clear();
+            self.steps_since_best = 0;
             None
         } else {
             Some(StopReason::Plateau)
@@ -174,52 +162,26 @@ impl Convergence {
         (!self.last_mean.is_nan()).then_some(self.last_mean)
     }
 
-    /// The state, for a checkpoint: the window, the drops, the last mean and the trend.
-    pub fn state(&self) -> Vec<f64> {
-        let mut state = vec![
+    /// The state, for a checkpoint.
+    pub fn state(&self) -> [f64; 6] {
+        [
             self.window_sum,
             self.window_steps as f64,
+            self.best,
+            self.steps_since_best as f64,
             self.drops as f64,
             self.last_mean,
-        ];
-        state.extend(&self.trend);
-        state
+        ]
     }
 
-    /// Restores a [`Convergence::state`] of the same rule.
-    pub fn set_state(&mut self, state: &[f64]) -> anyhow::Result<()> {
-        let [window_sum, window_steps, drops, last_mean, trend @ ..] = state else {
-            anyhow::bail!("a fit state has at least 4 numbers, not {}", state.len());
-        };
-        anyhow::ensure!(
-            trend.len() <= self.trend_windows(),
-            "a fit state holds a trend of {} windows, more than the rule's {}",
-            trend.len(),
-            self.trend_windows()
-        );
-        self.window_sum = *window_sum;
-        self.window_steps = *window_steps as usize;
-        self.drops = *drops as usize;
-        self.last_mean = *last_mean;
-        self.trend = trend.to_vec();
-        Ok(())
-    }
-}
-
-/// The Theil–Sen slope of equally spaced values: the median of `(y_j − y_i) / (j − i)` over
-/// every pair `i < j`.
-fn theil_sen_slope(y: &[f64]) -> f64 {
-    let mut slopes = Vec::with_capacity(y.len() * y.len().saturating_sub(1) / 2);
-    for i in 0..y.len() {
-        for j in i + 1..y.len() {
-            slopes.push((y[j] - y[i]) / (j - i) as f64);
-        }
-    }
-    slopes.sort_by(f64::total_cmp);
-    match slopes.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => slopes[n / 2],
-        n => 0.5 * (slopes[n / 2 - 1] + slopes[n / 2]),
+    /// Restores a [`Convergence::state`].
+    pub fn set_state(&mut self, state: [f64; 6]) {
+        self.window_sum = state[0];
+        self.window_steps = state[1] as usize;
+        self.best = state[2];
+        self.steps_since_best = state[3] as usize;
+        self.drops = state[4] as usize;
+        self.last_mean = state[5];
     }
 }
 
@@ -259,39 +221,17 @@ mod tests {
         // Halving every window: never a plateau.
         let falling = (0..200).map(|i| 0.5f64.powi(i / 10));
         assert_eq!(first_stop(falling, usize::MAX), None);
-        // Flat from the start: a plateau once three windows make a trend.
+        // Flat from the start: the first window sets the best, three more make the plateau.
         assert_eq!(
             first_stop(std::iter::repeat_n(1.0, 200), usize::MAX),
-            Some((30, StopReason::Plateau))
+            Some((40, StopReason::Plateau))
         );
-        // Falls below 1% per plateau span do not count.
+        // Improvements below 1% do not count.
         let creeping = (0..200).map(|i| 0.999f64.powi(i / 10));
         assert_eq!(
             first_stop(creeping, usize::MAX),
-            Some((30, StopReason::Plateau))
+            Some((40, StopReason::Plateau))
         );
-    }
-
-    #[test]
-    fn spikes_of_a_noisy_fit_neither_hide_a_fall_nor_fake_one() {
-        let rule = StopRule {
-            check_every: 1,
-            plateau_steps: 10,
-            ..rule()
-        };
-        // Every fourth window three times too high.
-        let spiked = |base: f64, w: usize| if w % 4 == 3 { 3.0 * base } else { base };
-        let run = |loss: &dyn Fn(usize) -> f64| {
-            let mut c = Convergence::new(rule);
-            (0..300).find_map(|w| {
-                c.observe(loss(w));
-                c.check(false).map(|_| w + 1)
-            })
-        };
-        // Falling 2% a window under the spikes: never a plateau.
-        assert_eq!(run(&|w| spiked(0.98f64.powi(w as i32), w)), None);
-        // Flat under the spikes: a plateau as soon as the trend is full.
-        assert_eq!(run(&|w| spiked(1.0, w)), Some(10));
     }
 
     #[test]
@@ -311,11 +251,10 @@ mod tests {
                 scales.push(c.lr_scale());
             }
         }
-        // A plateau at 30 (drop), 60 (drop), 90 (stop): each trend starts after the drop.
-        assert_eq!(stopped, Some((90, StopReason::Plateau)));
-        assert_eq!(scales[1], 1.0);
-        assert!((scales[2] - 0.1).abs() < 1e-15 && (scales[4] - 0.1).abs() < 1e-15);
-        assert!((scales[5] - 0.01).abs() < 1e-15);
+        // Best at 10, a plateau at 40 (drop), 70 (drop), 100 (stop).
+        assert_eq!(stopped, Some((100, StopReason::Plateau)));
+        assert_eq!(scales[2], 1.0);
+        assert!((scales[3] - 0.1).abs() < 1e-15 && (scales[8] - 0.01).abs() < 1e-15);
     }
 
     #[test]
@@ -334,7 +273,7 @@ mod tests {
             }
         }
         let mut b = Convergence::new(rule());
-        b.set_state(&a.state()).unwrap();
+        b.set_state(a.state());
         for &l in &losses[47..] {
             let (da, db) = (a.observe(l), b.observe(l));
             assert_eq!(da, db);
