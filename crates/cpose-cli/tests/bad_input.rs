@@ -692,6 +692,16 @@ const ATE_KITTI: &[&str] = &[
 fn trajectory_files() {
     let cases = [
         Case {
+            name: "tum: a missing file, its cause printed once",
+            files: &[GT],
+            args: ATE,
+            code: 2,
+            expect: &[
+                "cannot read trajectory file est.txt",
+                "No such file or directory",
+            ],
+        },
+        Case {
             name: "tum: a line with 7 columns",
             files: &[GT, ("est.txt", T("1.0 0 0 0 0 0 0 1\n2.0 1 0 0 0 0 1\n"))],
             args: ATE,
@@ -3803,6 +3813,16 @@ const IMU_YAML: &str = "seq/mav0/imu0/sensor.yaml";
 #[test]
 fn euroc_folders() {
     let cases = [
+        Case {
+            name: "ground truth: missing, its cause printed once",
+            files: &[FIT_EUROC, ("seq", S(euroc)), (GT_CSV, Rm)],
+            args: RUN_X,
+            code: 1,
+            expect: &[
+                "cannot read seq/mav0/state_groundtruth_estimate0/data.csv",
+                "No such file or directory",
+            ],
+        },
         Case {
             name: "ground truth: 16 columns",
             files: &[

@@ -21,10 +21,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use cpose_core::config::Config;
-use cpose_core::eval::{self, Trajectory};
+use cpose_core::eval::{self, Sim3, Trajectory};
 use cpose_core::nn::{Adam, Convergence, StopReason, StopRule};
 use cpose_core::plot::{self, Line, Panel, SeriesStyle, TrajectorySeries, YScale};
-use cpose_core::pose_field::saved::{FieldFrame, SavedPoseField};
+use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
@@ -465,12 +465,12 @@ impl Normalisation {
         Isometry3::from_parts(Translation3::from(p), field_from_world * pose.rotation)
     }
     fn to_world_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        self.frame().to_world(pose)
+        self.frame().transform_pose(pose)
     }
     /// The field's frame in the world, for its saved file: `p_world = R (s p + c)`.
-    fn frame(&self) -> FieldFrame {
-        FieldFrame {
-            rotation: self.world_from_field,
+    fn frame(&self) -> Sim3 {
+        Sim3 {
+            rotation: self.world_from_field.to_rotation_matrix(),
             translation: self.world_from_field * self.centre,
             scale: self.scale,
         }

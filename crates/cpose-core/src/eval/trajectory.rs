@@ -10,7 +10,7 @@ use nalgebra::Isometry3;
 #[derive(Debug, thiserror::Error)]
 pub enum TrajectoryError {
     /// The file could not be opened or read (missing, a folder, not UTF-8, …).
-    #[error("cannot read trajectory file ({source}): {}", path.display())]
+    #[error("cannot read trajectory file {}", path.display())]
     Read {
         /// The file.
         path: PathBuf,
@@ -18,7 +18,7 @@ pub enum TrajectoryError {
         source: std::io::Error,
     },
     /// The file could not be written.
-    #[error("cannot write trajectory file ({source}): {}", path.display())]
+    #[error("cannot write trajectory file {}", path.display())]
     Write {
         /// The file.
         path: PathBuf,

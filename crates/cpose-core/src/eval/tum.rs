@@ -330,7 +330,7 @@ mod tests {
         let path = temp_path("does-not-exist.txt");
         let err = read_tum(&path).unwrap_err();
         assert!(matches!(err, TrajectoryError::Read { .. }));
-        assert!(err.to_string().starts_with("cannot read trajectory file ("));
+        assert!(err.to_string().starts_with("cannot read trajectory file "));
         assert!(err.to_string().ends_with(&path.display().to_string()));
         // A folder is not a file either.
         let err = read_tum(std::env::temp_dir()).unwrap_err();

@@ -21,10 +21,11 @@
 use std::path::Path;
 
 use anyhow::{Context, bail, ensure};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Config, Section};
+use crate::eval::Sim3;
 use crate::fs::write_atomic;
 use crate::registry::{FieldContext, build_pose_field};
 use crate::{Order, PoseBatch, PoseField, TimeRange};
@@ -37,35 +38,6 @@ pub const FORMAT: &str = "cpose-pose-field/1";
 /// The largest JSON header read (the metadata of a field with ten million frame times).
 const MAX_HEADER_BYTES: u64 = 256 << 20;
 
-/// The similarity from a field's frame to the world: `p_world = scale · R p + translation`,
-/// `R_world = R · R_field`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FieldFrame {
-    /// `R`.
-    pub rotation: UnitQuaternion<f64>,
-    /// `t`, metres.
-    pub translation: Vector3<f64>,
-    /// `s` (positive).
-    pub scale: f64,
-}
-
-impl FieldFrame {
-    /// The field's frame is the world's.
-    pub fn identity() -> Self {
-        Self {
-            rotation: UnitQuaternion::identity(),
-            translation: Vector3::zeros(),
-            scale: 1.0,
-        }
-    }
-
-    /// A pose of the field's frame in the world's.
-    pub fn to_world(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        let p = self.rotation * pose.translation.vector * self.scale + self.translation;
-        Isometry3::from_parts(Translation3::from(p), self.rotation * pose.rotation)
-    }
-}
-
 /// A pose field's config, context, frame and parameters: everything that rebuilds it.
 #[derive(Clone, Debug)]
 pub struct SavedPoseField {
@@ -73,8 +45,8 @@ pub struct SavedPoseField {
     pub config: String,
     /// The times and seed it was built for.
     pub context: FieldContext,
-    /// Its frame in the world.
-    pub frame: FieldFrame,
+    /// Its frame in the world: `p_world = s·R·p + t`, `R_world = R·R_field`.
+    pub frame: Sim3,
     /// Its parameters in [`PoseField::params`] order.
     pub params: Vec<f32>,
 }
@@ -116,7 +88,7 @@ pub struct LoadedPoseField {
     /// The field, its parameters restored.
     pub field: Box<dyn PoseField>,
     /// Its frame in the world.
-    pub frame: FieldFrame,
+    pub frame: Sim3,
 }
 
 /// A field's pose and velocities at one time, in the world.
@@ -137,7 +109,7 @@ impl SavedPoseField {
     pub fn capture(
         section: &Section<'_>,
         context: &FieldContext,
-        frame: FieldFrame,
+        frame: Sim3,
         field: &dyn PoseField,
     ) -> anyhow::Result<Self> {
         let table: toml::Table = section.decode()?;
@@ -159,7 +131,7 @@ impl SavedPoseField {
             start_secs,
             end_secs,
         } = self.context.time_range;
-        let q = self.frame.rotation.quaternion();
+        let q = UnitQuaternion::from_rotation_matrix(&self.frame.rotation);
         let metadata = Metadata {
             format: FORMAT.to_owned(),
             config: self.config.clone(),
@@ -255,8 +227,8 @@ impl SavedPoseField {
                 frame_times_secs,
                 seed,
             },
-            frame: FieldFrame {
-                rotation: UnitQuaternion::new_normalize(rotation),
+            frame: Sim3 {
+                rotation: UnitQuaternion::new_normalize(rotation).to_rotation_matrix(),
                 translation: f.translation.into(),
                 scale: f.scale,
             },
@@ -290,9 +262,9 @@ impl LoadedPoseField {
         Ok((0..times_secs.len())
             .map(|i| FieldSample {
                 t_secs: times_secs[i],
-                pose: f.to_world(&out.world_from_body(i)),
+                pose: f.transform_pose(&out.world_from_body(i)),
                 ang_vel_body: out.ang_vel_body(i),
-                lin_vel_world: f.rotation * out.lin_vel_world[i] * f.scale,
+                lin_vel_world: f.scale * (f.rotation * out.lin_vel_world[i]),
             })
             .collect())
     }
@@ -344,8 +316,8 @@ control_points = 6
     fn a_saved_field_samples_as_the_original_in_the_world() {
         let dir = TempDir::new("saved-field");
         let config = Config::from_text("test.toml", FIELDS);
-        let frame = FieldFrame {
-            rotation: UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+        let frame = Sim3 {
+            rotation: nalgebra::Rotation3::from_euler_angles(0.1, -0.2, 0.3),
             translation: Vector3::new(1.0, -2.0, 0.5),
             scale: 2.5,
         };
@@ -362,7 +334,7 @@ control_points = 6
             let mut out = PoseBatch::default();
             field.evaluate(&times, Order::Velocity, &mut out).unwrap();
             for (i, s) in samples.iter().enumerate() {
-                let want = frame.to_world(&out.world_from_body(i));
+                let want = frame.transform_pose(&out.world_from_body(i));
                 assert!((s.pose.translation.vector - want.translation.vector).norm() < 1e-12);
                 assert!(s.pose.rotation.angle_to(&want.rotation) < 1e-12);
                 assert!((s.ang_vel_body - out.ang_vel_body(i)).norm() < 1e-12);
@@ -376,8 +348,8 @@ control_points = 6
     fn the_world_velocity_is_the_derivative_of_the_world_position() {
         let config = Config::from_text("test.toml", FIELDS);
         let section = config.section("p");
-        let frame = FieldFrame {
-            rotation: UnitQuaternion::from_euler_angles(0.4, 0.1, -0.3),
+        let frame = Sim3 {
+            rotation: nalgebra::Rotation3::from_euler_angles(0.4, 0.1, -0.3),
             translation: Vector3::new(0.2, 0.0, -1.0),
             scale: 3.0,
         };
@@ -412,9 +384,8 @@ control_points = 6
         let config = Config::from_text("test.toml", FIELDS);
         let section = config.section("p");
         let field = trained(&section);
-        let saved =
-            SavedPoseField::capture(&section, &context(), FieldFrame::identity(), field.as_ref())
-                .unwrap();
+        let saved = SavedPoseField::capture(&section, &context(), Sim3::identity(), field.as_ref())
+            .unwrap();
         let path = dir.join("p.safetensors");
         saved.write(&path).unwrap();
         let good = std::fs::read(&path).unwrap();
