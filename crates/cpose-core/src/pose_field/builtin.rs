@@ -141,12 +141,13 @@ inventory::submit! {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use crate::config::Config;
     use crate::registry::{FieldContext, build_pose_field, pose_fields};
     use crate::{Order, PoseBatch, TimeRange};
 
-    fn ctx() -> FieldContext {
+    /// Two seconds with a frame every half second (also the saved-field tests' context).
+    pub(in crate::pose_field) fn ctx() -> FieldContext {
         FieldContext {
             time_range: TimeRange::new(0.0, 2.0).unwrap(),
             frame_times_secs: vec![0.0, 0.5, 1.0, 1.5, 2.0],

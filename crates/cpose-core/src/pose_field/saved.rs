@@ -273,15 +273,8 @@ impl LoadedPoseField {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pose_field::builtin::tests::ctx as context;
     use crate::testing::TempDir;
-
-    fn context() -> FieldContext {
-        FieldContext {
-            time_range: TimeRange::new(0.0, 2.0).unwrap(),
-            frame_times_secs: vec![0.0, 0.5, 1.0, 1.5, 2.0],
-            seed: 3,
-        }
-    }
 
     const FIELDS: &str = r#"
 task = "none"
