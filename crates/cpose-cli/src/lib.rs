@@ -71,6 +71,9 @@ enum Command {
     List,
     /// Run the experiment described by a config file.
     Run(RunArgs),
+    /// Print a task's default config, or check a config without running it.
+    #[command(subcommand)]
+    Config(ConfigCommand),
     /// Evaluate trajectories.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -84,6 +87,25 @@ enum Command {
     Completions {
         /// The shell: bash, elvish, fish, powershell or zsh.
         shell: clap_complete::Shell,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum ConfigCommand {
+    /// Print the task's complete default config, every key commented; it runs as it is
+    /// (`cpose config show nerf > my.toml && cpose run my.toml`).
+    Show {
+        /// The task, as `cpose list` names it.
+        task: String,
+    },
+    /// Decode and check every table and value of a config, as `cpose run` does before it
+    /// starts, without reading data or writing anything.
+    Check {
+        /// The config file.
+        config: PathBuf,
+        /// Override a config value, as `cpose run --set KEY=VALUE`. Repeatable.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
     },
 }
 
@@ -307,6 +329,10 @@ where
     let result = match cli.command {
         Command::List => list(),
         Command::Run(args) => run(&args, command_line),
+        Command::Config(ConfigCommand::Show { task }) => config_show(&task),
+        Command::Config(ConfigCommand::Check { config, overrides }) => {
+            config_check(&config, &overrides)
+        }
         Command::Eval(EvalCommand::Ate(args)) => eval_ate(&args),
         Command::Eval(EvalCommand::Rpe(args)) => eval_rpe(&args),
         Command::Convert(args) => convert(&args),
@@ -368,7 +394,35 @@ fn list() -> Result<(), Failure> {
     Ok(())
 }
 
-/// `cpose run CONFIG`: load, look up, create the run folder, record the provenance, save the
+/// `cpose config show TASK`: the task's default config, to stdout.
+fn config_show(name: &str) -> Result<(), Failure> {
+    let task = registry::find_task(name).map_err(|e| Failure::Usage(e.into()))?;
+    let text = format!(
+        "{}\n{}",
+        (task.default_config)(),
+        cpose_core::config::RUN_TABLE_DEFAULTS
+    );
+    let _ = std::io::stdout().lock().write_all(text.as_bytes());
+    Ok(())
+}
+
+/// `cpose config check CONFIG`: load, look up the task, let it check every value.
+fn config_check(path: &Path, overrides: &[String]) -> Result<(), Failure> {
+    let usage = |e: anyhow::Error| Failure::Usage(e);
+    let config = Config::load(path, overrides).map_err(|e| usage(e.into()))?;
+    let run_config = config.run_config().map_err(|e| usage(e.into()))?;
+    let task = registry::task_for(&config).map_err(|e| usage(e.into()))?;
+    (task.check)(&config, &run_config).map_err(usage)?;
+    let _ = writeln!(
+        std::io::stdout().lock(),
+        "{}: a valid {} config",
+        path.display(),
+        task.name
+    );
+    Ok(())
+}
+
+/// `cpose run CONFIG`: load, look up, check, create the run folder, record the provenance, save the
 /// config, run, report.
 fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
     registry::check_unique().map_err(|e| Failure::Run(e.into()))?;
@@ -400,6 +454,7 @@ fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
         // before anything runs.
         study::check_resume(dir, task.name, &config).map_err(|e| usage(e.into()))?;
     }
+    (task.check)(&config, &run_config).map_err(usage)?;
     run_config.init_thread_pool();
 
     let options = RunDirOptions {
@@ -441,14 +496,15 @@ fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
             let _ = writeln!(std::io::stdout().lock(), "{}", run_dir.path().display());
             Ok(())
         }
+        // The error is printed once, by `main_with_args`; the log keeps it too.
         (Ok(()), Err(e)) => {
             let err = anyhow::Error::from(e)
                 .context("the run finished, but its provenance was not saved");
-            run_dir.log(format_args!("failed: {err:#}"));
+            run_dir.log_file_only(format_args!("failed: {err:#}"));
             Err(Failure::Run(err))
         }
         (Err(err), recorded) => {
-            run_dir.log(format_args!("failed: {err:#}"));
+            run_dir.log_file_only(format_args!("failed: {err:#}"));
             if let Err(e) = recorded {
                 run_dir.log(format_args!("and its provenance was not saved: {e}"));
             }

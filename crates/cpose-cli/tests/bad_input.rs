@@ -1487,14 +1487,14 @@ fn task_configs() {
             name: "planar: scale = -1",
             files: &[],
             args: &["run", PLANAR, "--set", "image.scale=-1"],
-            code: 1,
+            code: 2,
             expect: &["planar.toml", "[image] scale must be in (0, 1], got -1"],
         },
         Case {
             name: "planar: scale = nan",
             files: &[],
             args: &["run", PLANAR, "--set", "image.scale=nan"],
-            code: 1,
+            code: 2,
             expect: &["planar.toml", "[image] scale must be in (0, 1], got NaN"],
         },
         Case {
@@ -1511,7 +1511,7 @@ fn task_configs() {
             name: "planar: procedural_size = [0, 0]",
             files: &[],
             args: &["run", PLANAR, "--set", "image.procedural_size=[0,0]"],
-            code: 1,
+            code: 2,
             expect: &[
                 "planar.toml",
                 "[image] procedural_size 0×0: each side must lie in 8..=8192",
@@ -1531,7 +1531,7 @@ fn task_configs() {
             name: "planar: one control point",
             files: &[],
             args: &["run", PLANAR, "--set", "motion.control_points=1"],
-            code: 1,
+            code: 2,
             expect: &[
                 "planar.toml",
                 "[motion] control_points must be at least 4 (a cubic spline), got 1",
@@ -1541,7 +1541,7 @@ fn task_configs() {
             name: "planar: rotation_deg = nan",
             files: &[],
             args: &["run", PLANAR, "--set", "motion.rotation_deg=nan"],
-            code: 1,
+            code: 2,
             expect: &[
                 "planar.toml",
                 "[motion] rotation_deg must be finite and ≥ 0, got NaN",
@@ -1551,7 +1551,7 @@ fn task_configs() {
             name: "planar: translation = inf",
             files: &[],
             args: &["run", PLANAR, "--set", "motion.translation=inf"],
-            code: 1,
+            code: 2,
             expect: &[
                 "planar.toml",
                 "[motion] translation must be finite and ≥ 0, got inf",
@@ -1581,7 +1581,7 @@ fn task_configs() {
             name: "planar: lr_rotation = nan",
             files: &[],
             args: &["run", PLANAR, "--set", "train.lr_rotation=nan"],
-            code: 1,
+            code: 2,
             expect: &[
                 "planar.toml",
                 "[train] lr_rotation must be finite and ≥ 0, got NaN",
@@ -1591,7 +1591,7 @@ fn task_configs() {
             name: "planar: spline_reset_every = 0",
             files: &[],
             args: &["run", PLANAR, "--set", "train.spline_reset_every=0"],
-            code: 1,
+            code: 2,
             expect: &[
                 "planar.toml",
                 "[train] spline reset: reset_every must be ≥ 1",
@@ -1623,7 +1623,7 @@ fn task_configs() {
             name: "trajectory: duration_secs = 1e12",
             files: &[],
             args: &["run", FIT, "--set", "data.duration_secs=1e12"],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[data] duration_secs × the larger of pose_rate_hz and imu_rate_hz is 2.000e14 samples; at most 10000000 are generated",
@@ -1633,7 +1633,7 @@ fn task_configs() {
             name: "trajectory: pose_rate_hz = nan",
             files: &[],
             args: &["run", FIT, "--set", "data.pose_rate_hz=nan"],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "pose_rate_hz = NaN and imu_rate_hz = 200 must be positive finite numbers",
@@ -1690,7 +1690,7 @@ fn task_configs() {
             name: "trajectory: tolerance_deg = nan",
             files: &[],
             args: &["run", FIT, "--set", "fit.tolerance_deg=nan"],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[fit] tolerance_deg = NaN must be a number ≥ 0",
@@ -1700,7 +1700,7 @@ fn task_configs() {
             name: "trajectory: lr_translation = inf",
             files: &[],
             args: &["run", FIT, "--set", "fit.lr_translation=inf"],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[fit] lr_translation = inf must be a positive number",
@@ -1720,7 +1720,7 @@ fn task_configs() {
             name: "trajectory: fit.fields names no table",
             files: &[],
             args: &["run", FIT, "--set", "fit.fields=[\"nope\"]"],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[fit] fields names \"nope\", which has no [fields.nope] table (tables: lie_spline, posenet, spline)",
@@ -1730,7 +1730,7 @@ fn task_configs() {
             name: "trajectory: lr_factor = 2",
             files: &[],
             args: &["run", FIT, "--set", "fit.lr_factor=2"],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[fit] lr_factor = 2 must lie in (0, 1)",
@@ -1747,7 +1747,7 @@ fn task_configs() {
                 "--set",
                 "fit.loose_window_secs=-1",
             ],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[fit] loose_window_secs = -1 must be a positive number of seconds",
@@ -1795,7 +1795,7 @@ fn task_configs() {
             name: "trajectory: a field named like the reference",
             files: &[],
             args: &["run", FIT, "--set", "fields.interp.kind=\"spline\""],
-            code: 1,
+            code: 2,
             expect: &[
                 "trajectory_fit.toml",
                 "[fields.interp] is the name of the interpolation reference; call the field otherwise",
@@ -1864,7 +1864,7 @@ fn task_configs() {
             name: "nerf: rays_per_step = 0",
             files: &[],
             args: &["run", NERF, "--set", "train.rays_per_step=0"],
-            code: 1,
+            code: 2,
             expect: &["[train] rays_per_step = 0: expected at least 1"],
         },
         Case {
@@ -1905,8 +1905,8 @@ fn task_configs() {
             name: "nerf: no frames",
             files: &[],
             args: &["run", NERF, "--set", "orbit.frames=0"],
-            code: 1,
-            expect: &["orbit.frames: expected at least 2, got 0"],
+            code: 2,
+            expect: &["orbit.frames: expected 2 to 100000, got 0"],
         },
         Case {
             name: "nerf: unknown noise",
@@ -1940,7 +1940,7 @@ fn task_configs() {
                 "--set",
                 "noise.max_rotation_deg=nan",
             ],
-            code: 1,
+            code: 2,
             expect: &["noise.max_rotation_deg: expected a value in [0, 180], got NaN"],
         },
         Case {
@@ -2000,7 +2000,7 @@ fn task_configs() {
                 "--set",
                 "train.pose_warmup=2",
             ],
-            code: 1,
+            code: 2,
             expect: &["[train] pose_warmup = 2 must lie in [0, 1] (a fraction of the steps)"],
         },
         Case {
@@ -2041,28 +2041,28 @@ fn task_configs() {
             name: "events: duration_secs = -1",
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.duration_secs=-1"],
-            code: 1,
+            code: 2,
             expect: &["[simulation]: turntable.duration_secs: expected a finite value > 0, got -1"],
         },
         Case {
             name: "events: radius = nan",
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.radius=nan"],
-            code: 1,
+            code: 2,
             expect: &["[simulation]: turntable.radius: expected a finite value > 0, got NaN"],
         },
         Case {
             name: "events: render_steps = 0",
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.render_steps=0"],
-            code: 1,
+            code: 2,
             expect: &["[simulation]: render_steps: expected at least 1, got 0"],
         },
         Case {
             name: "events: threshold_sigma = -1",
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.threshold_sigma=-1"],
-            code: 1,
+            code: 2,
             expect: &[
                 "[simulation]: simulator.threshold_sigma: expected a finite value ≥ 0, got -1",
             ],
@@ -2071,8 +2071,8 @@ fn task_configs() {
             name: "events: threshold = 0",
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.threshold=0"],
-            code: 1,
-            expect: &["[train]: need threshold > 0 and eps > 0"],
+            code: 2,
+            expect: &["[simulation]: simulator.threshold: expected a finite value > 0, got 0"],
         },
         Case {
             name: "events: typo in [simulation]",
@@ -2136,7 +2136,7 @@ fn task_configs() {
             name: "events: no methods",
             files: &[],
             args: &["run", EVENTS, "--set", "train.methods=[]"],
-            code: 1,
+            code: 2,
             expect: &["[train] methods: no methods to run"],
         },
         Case {
@@ -2195,7 +2195,7 @@ fn task_configs() {
                 "--set",
                 "synthetic.width=1000000",
             ],
-            code: 1,
+            code: 2,
             expect: &["[synthetic]: width = 1000000 must lie in 16..=4096"],
         },
         Case {
@@ -2209,7 +2209,7 @@ fn task_configs() {
                 "--set",
                 "synthetic.frames=1",
             ],
-            code: 1,
+            code: 2,
             expect: &["[synthetic]: frames = 1 must be at least 2"],
         },
         Case {
@@ -2223,7 +2223,7 @@ fn task_configs() {
                 "--set",
                 "synthetic.frame_rate=nan",
             ],
-            code: 1,
+            code: 2,
             expect: &["[synthetic]: frame_rate = NaN must be positive"],
         },
         Case {
@@ -2240,7 +2240,7 @@ fn task_configs() {
             name: "slam: no methods",
             files: &[],
             args: &["run", ROOM, "--set", "slam.methods=[]"],
-            code: 1,
+            code: 2,
             expect: &[
                 "slam.methods is empty: name at least one of baseline, prev, world, random, intrinsic",
             ],
@@ -2266,7 +2266,7 @@ fn task_configs() {
                 "--set",
                 "bounds.box=[[1, 0], [0, 1], [0, 1]]",
             ],
-            code: 1,
+            code: 2,
             expect: &[
                 "bounds.box = [[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]]: every axis needs [min, max] with min < max",
             ],
@@ -2275,14 +2275,14 @@ fn task_configs() {
             name: "slam: a mesh voxel whose grid would overflow",
             files: &[],
             args: &["run", ROOM, "--set", "mesh.voxel=1e-9"],
-            code: 1,
+            code: 2,
             expect: &["[mesh]", "nodes (at most 134217728): choose a larger voxel"],
         },
         Case {
             name: "slam: a mesh voxel of NaN",
             files: &[],
             args: &["run", ROOM, "--set", "mesh.voxel=nan"],
-            code: 1,
+            code: 2,
             expect: &[
                 "[mesh]",
                 "mesh voxel size must be a positive number, got NaN",
@@ -2292,7 +2292,7 @@ fn task_configs() {
             name: "slam: a radius without a centre",
             files: &[],
             args: &["run", ROOM, "--set", "bounds.radius=-1"],
-            code: 1,
+            code: 2,
             expect: &[
                 "[bounds]: give either box = [[x0, x1], [y0, y1], [z0, z1]] or centre and radius",
             ],
@@ -2358,14 +2358,14 @@ fn task_configs() {
                 "--set",
                 "imu_sim.rate_hz=0",
             ],
-            code: 1,
+            code: 2,
             expect: &["[imu_sim] rate_hz = 0: expected a rate in (0, 10000] Hz"],
         },
         Case {
             name: "slam_imu: imu_sim.rate_hz = 1e12",
             files: &[],
             args: &["run", IMU, "--set", "imu_sim.rate_hz=1e12"],
-            code: 1,
+            code: 2,
             expect: &["[imu_sim] rate_hz = 1000000000000: expected a rate in (0, 10000] Hz"],
         },
         Case {
@@ -2392,8 +2392,73 @@ fn task_configs() {
             name: "slam_imu: imu.translation_scale = -1",
             files: &[],
             args: &["run", IMU, "--set", "imu.translation_scale=-1"],
-            code: 1,
+            code: 2,
             expect: &["imu.translation_scale = -1 must be positive"],
+        },
+        Case {
+            name: "slam_imu: unknown method",
+            files: &[],
+            args: &["run", IMU, "--set", "slam.methods=[\"tigth\"]"],
+            code: 2,
+            expect: &[
+                "unknown method \"tigth\"; known methods: baseline, prev, prev_loose, prev_tight, prev_accel, prev_combined, none, loose, tight, accel, combined",
+            ],
+        },
+        Case {
+            name: "trajectory: pose_weight = -1",
+            files: &[],
+            args: &["run", FIT, "--set", "fit.pose_weight=-1"],
+            code: 2,
+            expect: &["[fit] pose_weight = -1 must be a number ≥ 0"],
+        },
+        Case {
+            name: "trajectory: gyro_weight = nan",
+            files: &[],
+            args: &["run", FIT, "--set", "fit.gyro_weight=nan"],
+            code: 2,
+            expect: &["[fit] gyro_weight = NaN must be a number ≥ 0"],
+        },
+        Case {
+            name: "trajectory: imu_batch = 0",
+            files: &[],
+            args: &["run", FIT, "--set", "fit.imu_batch=0"],
+            code: 2,
+            expect: &["[fit] imu_batch = 0 must be at least 1"],
+        },
+        Case {
+            name: "events: scene_radius = -1",
+            files: &[],
+            args: &["run", EVENTS, "--set", "render.scene_radius=-1"],
+            code: 2,
+            expect: &["[render] scene_radius = -1: expected a finite radius > 0"],
+        },
+        Case {
+            name: "planar: 100000 patches",
+            files: &[],
+            args: &["run", PLANAR, "--set", "motion.patches=100000"],
+            code: 2,
+            expect: &["[motion] patches must lie in 2..=1000, got 100000"],
+        },
+        Case {
+            name: "nerf: a billion frames",
+            files: &[],
+            args: &["run", NERF, "--set", "orbit.frames=1000000000"],
+            code: 2,
+            expect: &["orbit.frames: expected 2 to 100000, got 1000000000"],
+        },
+        Case {
+            name: "config check: a bad value",
+            files: &[],
+            args: &["config", "check", NERF, "--set", "train.rays_per_step=0"],
+            code: 2,
+            expect: &["[train] rays_per_step = 0: expected at least 1"],
+        },
+        Case {
+            name: "config show: unknown task",
+            files: &[],
+            args: &["config", "show", "slma"],
+            code: 2,
+            expect: &["unknown task \"slma\"; known tasks: "],
         },
         Case {
             name: "slam_imu: unknown bias",
@@ -2452,10 +2517,8 @@ fn task_configs() {
                 "--set",
                 "synthetic.width=1000000",
             ],
-            code: 1,
-            expect: &[
-                "writing the synthetic room to room: [synthetic]: width = 1000000 must lie in 16..=4096",
-            ],
+            code: 2,
+            expect: &["synth_room.toml: [synthetic]: width = 1000000 must lie in 16..=4096"],
         },
         Case {
             name: "synth_room: depth_noise = \"yes\"",
@@ -2520,7 +2583,7 @@ fn task_configs() {
                 "--set",
                 "synthetic.scale=-1",
             ],
-            code: 1,
+            code: 2,
             expect: &["[synthetic]: scale = -1 must lie in [0.1, 10]"],
         },
         Case {
@@ -2534,7 +2597,7 @@ fn task_configs() {
                 "--set",
                 "synthetic.trajectory_offset_s=nan",
             ],
-            code: 1,
+            code: 2,
             expect: &["[synthetic]: trajectory_offset_s = NaN must be ≥ 0"],
         },
     ];

@@ -527,6 +527,14 @@ fn every_config_runs_as_a_smoke_test() {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
     configs.sort();
+    // Every task's `cpose config show` too: it must run as it is.
+    let defaults = temp_dir("defaults");
+    for task in shipped_tasks() {
+        let out = cpose_in(&defaults, &["config", "show", task]);
+        assert!(out.status.success(), "{task}");
+        let text = String::from_utf8(out.stdout).unwrap();
+        configs.push(write(&defaults, &format!("default_{task}.toml"), &text));
+    }
     assert!(configs.len() >= 2, "{configs:?}");
     let has_data = cpose_core::fs::shared_data_dir().is_some();
     for config in configs {
@@ -701,6 +709,189 @@ fn every_config_runs_as_a_smoke_test() {
             assert!(mesh.starts_with(b"ply\n"), "{}: no mesh", config.display());
         }
     }
+}
+
+/// The tasks cpose ships (the test's own registrations start with `zz_`).
+fn shipped_tasks() -> Vec<&'static str> {
+    let tasks: Vec<_> = cpose_core::registry::tasks()
+        .into_iter()
+        .map(|t| t.name)
+        .filter(|name| !name.starts_with("zz_"))
+        .collect();
+    assert!(tasks.len() >= 7, "{tasks:?}");
+    tasks
+}
+
+/// The keys serde lists after "expected" in an unknown-field error.
+fn expected_keys(message: &str) -> Vec<String> {
+    let (_, list) = message
+        .split_once(", expected")
+        .unwrap_or_else(|| panic!("no list of valid keys in {message}"));
+    let list = list.lines().next().unwrap_or_default();
+    list.split('`')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_owned)
+        .collect()
+}
+
+/// `cpose config show TASK` prints a config that `cpose config check` accepts, with every key
+/// the task reads: a probe key added to each table is refused with the table's valid keys, and
+/// each of them is in the table, set or commented (a commented key has no default value). The
+/// values are pinned to the defaults by each task's own unit test.
+#[test]
+fn config_show_prints_every_key_and_config_check_accepts_it() {
+    let dir = temp_dir("config-show");
+    for task in shipped_tasks() {
+        let out = cpose_in(&dir, &["config", "show", task]);
+        assert!(out.status.success(), "{task}");
+        let text = String::from_utf8(out.stdout).unwrap();
+        let file = write(&dir, &format!("{task}.toml"), &text);
+        let out = cpose_in(&dir, &["config", "check", file.to_str().unwrap()]);
+        assert!(
+            out.status.success(),
+            "{task}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains(&format!("a valid {task} config")));
+
+        let lines: Vec<&str> = text.lines().collect();
+        let header = |line: &str| {
+            let line = line.trim_start_matches("# ").trim();
+            let name = line.strip_prefix('[')?.split(']').next()?;
+            Some(name.to_owned())
+        };
+        // Each table's lines (the top level is ""), commented ones included.
+        let mut tables: Vec<(String, usize, Vec<&str>)> = vec![(String::new(), 0, Vec::new())];
+        for (i, line) in lines.iter().enumerate() {
+            match header(line) {
+                Some(name) => tables.push((name, i, Vec::new())),
+                None => tables.last_mut().unwrap().2.push(line),
+            }
+        }
+        let names: Vec<&str> = tables.iter().map(|(n, _, _)| n.as_str()).collect();
+        let mut probed = 0;
+        for (name, at, body) in &tables {
+            if !lines.get(*at).is_some_and(|l| l.starts_with('[')) && !name.is_empty() {
+                continue; // a commented table: nothing to probe
+            }
+            // The probe right after the table's header (or after `task = …` at the top level).
+            let after = if name.is_empty() {
+                lines.iter().position(|l| l.starts_with("task = ")).unwrap()
+            } else {
+                *at
+            };
+            let mut probe: Vec<&str> = lines.clone();
+            probe.insert(after + 1, "zz_probe = 0");
+            let config = cpose_core::Config::from_text("probe.toml", probe.join("\n"));
+            let checked = config
+                .run_config()
+                .map_err(anyhow::Error::from)
+                .and_then(|run| {
+                    (cpose_core::registry::find_task(task).unwrap().check)(&config, &run)
+                });
+            let Err(err) = checked else {
+                continue; // a table of free names (a map), or one decoded with the data
+            };
+            let message = format!("{err:#}");
+            assert!(
+                message.contains("unknown field `zz_probe`"),
+                "{task} [{name}]: {message}"
+            );
+            for key in expected_keys(&message) {
+                let dotted = if name.is_empty() {
+                    key.clone()
+                } else {
+                    format!("{name}.{key}")
+                };
+                let set = body.iter().any(|l| {
+                    let l = l.trim_start_matches("# ");
+                    l.starts_with(&format!("{key} ")) || l.starts_with(&format!("{key}="))
+                });
+                let table = names
+                    .iter()
+                    .any(|n| *n == dotted || n.starts_with(&format!("{dotted}.")));
+                assert!(
+                    set || table,
+                    "{task}: [{name}] has no {key:?} (set or commented):\n{text}"
+                );
+            }
+            probed += 1;
+        }
+        assert!(probed >= 2, "{task}: only {probed} tables probed");
+    }
+    // A task that is not registered: the error lists the tasks.
+    let out = cpose_in(&dir, &["config", "show", "nerff"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("known tasks:"));
+}
+
+/// `cpose config check` reports a bad value with the file, line and key, exit code 2, and
+/// writes nothing; `cpose run` reports the same before it creates the run folder.
+#[test]
+fn config_check_reports_a_bad_value_before_anything_runs() {
+    let dir = temp_dir("config-check");
+    let file = write(
+        &dir,
+        "bad.toml",
+        "task = \"nerf\"\n[train]\nrays_per_step = 0\n",
+    );
+    let out = cpose_in(&dir, &["config", "check", file.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("rays_per_step = 0"), "{err}");
+    let out = cpose_in(
+        &dir,
+        &[
+            "config",
+            "check",
+            file.to_str().unwrap(),
+            "--set",
+            "train.rays_per_step=64",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run_dir = dir.join("run");
+    let out = cpose_in(
+        &dir,
+        &[
+            "run",
+            file.to_str().unwrap(),
+            "-q",
+            "--out",
+            run_dir.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rays_per_step = 0"));
+    assert!(!run_dir.exists(), "the run folder was created");
+    // An error inside the run is in its log and printed once, also with the log echoed.
+    let missing = write(
+        &dir,
+        "missing.toml",
+        "task = \"nerf\"\n[data]\nsource = \"llff\"\npath = \"no_such_scene\"\n",
+    );
+    let out = cpose_in(
+        &dir,
+        &[
+            "run",
+            missing.to_str().unwrap(),
+            "--out",
+            run_dir.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("no_such_scene").count(), 1, "{err}");
+    let log = std::fs::read_to_string(run_dir.join("log.txt")).unwrap();
+    assert!(
+        log.contains("failed: ") && log.contains("no_such_scene"),
+        "{log}"
+    );
 }
 
 /// The planar study's bad input — an unreadable or corrupt image, an image smaller than the

@@ -120,6 +120,18 @@ impl ConfigError {
     }
 }
 
+/// The `[run]` table at its defaults, commented, as `cpose config show` ends every task's
+/// default config.
+pub const RUN_TABLE_DEFAULTS: &str = "\
+[run]                          # how to run, not what to compute (every task)
+seed = 0                       # seeds every random draw of the run
+threads = 2                    # size of the thread pool (1..=1024)
+# out_dir = \"runs/my-run\"      # run folder (default: runs/<task>-<date>-<time>; --out wins)
+iterations_scale = 1.0         # multiplies every step count; 0.01 makes a smoke test
+# report_every = 500           # steps between live reports of loss and errors (task default)
+checkpoint_secs = 60.0         # seconds between checkpoints (0: at every chance)
+";
+
 /// The shared `[run]` table: how to run, not what to compute.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]

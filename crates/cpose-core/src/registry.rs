@@ -5,8 +5,9 @@
 //! the registration is linked. Lists are sorted by name, since `inventory` gives no order.
 //!
 //! ```no_run
-//! use cpose_core::TimeRange;
+//! use anyhow::Context;
 //! use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
+//! use cpose_core::{Config, PoseField, RunConfig, TimeRange};
 //!
 //! #[derive(serde::Deserialize)]
 //! #[serde(deny_unknown_fields)]
@@ -18,17 +19,30 @@
 //!     model: serde::de::IgnoredAny,
 //! }
 //!
-//! /// A task: one function that decodes its own keys; `[model]` picks a pose field by `kind`.
+//! /// Decodes every key without running: a typo names line, column and the valid keys, and
+//! /// `[model]` picks a pose field by `kind`.
+//! fn build(config: &Config, run: &RunConfig) -> anyhow::Result<Box<dyn PoseField>> {
+//!     let params: Params = config.parse_params()?;
+//!     let time_range = TimeRange::new(0.0, params.duration_secs).context("duration_secs > 0")?;
+//!     let ctx = FieldContext { time_range, frame_times_secs: Vec::new(), seed: run.seed };
+//!     Ok(build_pose_field(&config.section("model"), &ctx)?)
+//! }
+//!
 //! fn run(input: &TaskInput) -> anyhow::Result<()> {
-//!     let params: Params = input.config.parse_params()?; // a typo names line, column, valid keys
-//!     let time_range = TimeRange::new(0.0, params.duration_secs).expect("positive duration");
-//!     let ctx = FieldContext { time_range, frame_times_secs: Vec::new(), seed: input.run.seed };
-//!     let field = build_pose_field(&input.config.section("model"), &ctx)?; // kind = "posenet"
+//!     let field = build(input.config, input.run)?;
 //!     input.run_dir.write_json("metrics.json", &field.num_params())?;
 //!     Ok(())
 //! }
 //!
-//! inventory::submit! { Task { name: "count_params", about: "build a pose field and count its parameters", run } }
+//! inventory::submit! {
+//!     Task {
+//!         name: "count_params",
+//!         about: "build a pose field and count its parameters",
+//!         default_config: || "task = \"count_params\"\nduration_secs = 2.0\n[model]\nkind = \"posenet\"\n".into(),
+//!         check: |config, run| build(config, run).map(drop),
+//!         run,
+//!     }
+//! }
 //! ```
 
 use std::collections::BTreeSet;
@@ -75,6 +89,14 @@ pub struct Task {
     pub name: &'static str,
     /// One line for `cpose list`.
     pub about: &'static str,
+    /// A complete config of the task with every key at its default, commented, that runs as it
+    /// is: what `cpose config show` prints, followed by the shared `[run]` table
+    /// ([`crate::config::RUN_TABLE_DEFAULTS`]).
+    pub default_config: fn() -> String,
+    /// Decodes and checks the whole config (every table, every value's range) without reading
+    /// data or writing anything: `cpose config check`, and `cpose run` before it creates the run
+    /// folder. Problems only the data can show (a missing file) are left to `run`.
+    pub check: fn(&Config, &RunConfig) -> anyhow::Result<()>,
     /// Runs the task; the run folder already holds `config.toml`.
     pub run: fn(&TaskInput) -> anyhow::Result<()>,
 }
@@ -230,8 +252,12 @@ mod tests {
         Ok(())
     }
 
-    inventory::submit! { Task { name: "zz_test_b", about: "test task b", run: noop } }
-    inventory::submit! { Task { name: "zz_test_a", about: "test task a", run: noop } }
+    fn no_check(_: &Config, _: &RunConfig) -> anyhow::Result<()> {
+        Ok(())
+    }
+
+    inventory::submit! { Task { name: "zz_test_b", about: "test task b", default_config: || "task = \"zz_test_b\"\n".into(), check: no_check, run: noop } }
+    inventory::submit! { Task { name: "zz_test_a", about: "test task a", default_config: || "task = \"zz_test_a\"\n".into(), check: no_check, run: noop } }
 
     /// The identity pose over a time range, with a configurable number of dummy parameters.
     struct Identity {

@@ -189,12 +189,22 @@ impl RunDir {
     /// Appends `<UTC time> [<seconds since start>] message` to `log.txt` and, if enabled, echoes
     /// the line to stderr. Logging never fails a run: I/O errors on the log are ignored.
     pub fn log(&self, message: impl std::fmt::Display) {
+        self.append_log(message, self.echo_log);
+    }
+
+    /// Appends to `log.txt` only, never echoing: for a message the caller prints itself (the
+    /// error that ends a run).
+    pub fn log_file_only(&self, message: impl std::fmt::Display) {
+        self.append_log(message, false);
+    }
+
+    fn append_log(&self, message: impl std::fmt::Display, echo: bool) {
         let line = format!(
             "{} [{:>8.3} s] {message}",
             utc_iso(SystemTime::now()),
             self.started.elapsed().as_secs_f64()
         );
-        if self.echo_log {
+        if echo {
             crate::progress::eprint_line(&line);
         }
         let Ok(mut guard) = self.log.lock() else {

@@ -465,6 +465,25 @@ pub fn check_f32_matches_f64(
     );
 }
 
+/// Asserts that `cpose config show TASK` states the task's defaults: the task's decoded
+/// config (`settings`, formatted with `{:?}`) of its default config equals that of `required`, a
+/// config with only the keys that have no default.
+pub fn check_default_config<T: std::fmt::Debug>(
+    task: &str,
+    required: &str,
+    settings: impl Fn(&crate::Config, &crate::RunConfig) -> anyhow::Result<T>,
+) {
+    let decode = |text: String| {
+        let config = crate::Config::from_text("default.toml", text);
+        let decoded = settings(&config, &crate::RunConfig::default());
+        format!("{:?}", decoded.unwrap_or_else(|e| panic!("{task}: {e:#}")))
+    };
+    let default = (crate::registry::find_task(task)
+        .expect("a registered task")
+        .default_config)();
+    assert_eq!(decode(default), decode(required.to_owned()), "{task}");
+}
+
 /// A fresh, empty folder under the system's temp dir for one test, removed with its contents
 /// when dropped — also when the test fails and unwinds. Derefs to its [`Path`].
 #[derive(Debug)]

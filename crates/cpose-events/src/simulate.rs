@@ -402,6 +402,29 @@ pub struct SyntheticEventsConfig {
     pub simulator: SimulatorConfig,
 }
 
+impl SyntheticEventsConfig {
+    /// Checks the ranges of the field docs; the error names the parameter.
+    pub fn validate(&self) -> Result<(), EventsError> {
+        self.turntable.validate()?;
+        self.simulator.validate()?;
+        let invalid = |key, expected, found: usize| EventsError::Invalid {
+            key,
+            expected,
+            found: found.to_string(),
+        };
+        if self.views < 2 {
+            return Err(invalid("views", "at least 2", self.views));
+        }
+        if self.render_steps == 0 {
+            return Err(invalid("render_steps", "at least 1", self.render_steps));
+        }
+        if self.held_out_supersample == 0 {
+            return Err(invalid("held_out_supersample", "at least 1", 0));
+        }
+        Ok(())
+    }
+}
+
 impl Default for SyntheticEventsConfig {
     /// Half the DAVIS346 resolution, 173 × 130 with a 50° horizontal field of view; the default
     /// [`Turntable`]; 360 render steps (1° each); 100 views; 4 held-out views; EventNeRF's
@@ -427,22 +450,8 @@ pub fn simulate_eventnerf_scene(
     scene: &SyntheticScene,
     config: &SyntheticEventsConfig,
 ) -> Result<(EventNerfScene, usize), EventsError> {
+    config.validate()?;
     let tt = &config.turntable;
-    tt.validate()?;
-    let invalid = |key, expected, found: usize| EventsError::Invalid {
-        key,
-        expected,
-        found: found.to_string(),
-    };
-    if config.views < 2 {
-        return Err(invalid("views", "at least 2", config.views));
-    }
-    if config.render_steps == 0 {
-        return Err(invalid("render_steps", "at least 1", config.render_steps));
-    }
-    if config.held_out_supersample == 0 {
-        return Err(invalid("held_out_supersample", "at least 1", 0));
-    }
     let duration = tt.duration_secs;
     let times = uniform_times(0.0, duration, config.render_steps);
     let sim = simulate_scene_events::<f64>(

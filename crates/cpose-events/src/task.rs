@@ -56,7 +56,7 @@ use cpose_core::geometry::rotation_angle_between;
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
-use cpose_core::{PoseField, PoseNetConfig, TimeRange};
+use cpose_core::{Config, PoseField, PoseNetConfig, RunConfig, TimeRange};
 use cpose_nerf::camera::PinholeCamera;
 use cpose_nerf::field3d::{RadianceField, RadianceFieldConfig, SceneBounds};
 use cpose_nerf::image::{Image, psnr};
@@ -80,6 +80,15 @@ inventory::submit! {
     Task {
         name: "events",
         about: "NeRF from colour events (paper §4.2): PoseNet vs interpolated or mis-calibrated poses",
+        default_config: || {
+            [
+                include_str!("../defaults/events.toml"),
+                RadianceFieldConfig::DEFAULT_TABLE,
+                PoseNetConfig::DEFAULT_TABLE,
+            ]
+            .join("\n")
+        },
+        check: |config, run| Settings::new(config, run).map(drop),
         run,
     }
 }
@@ -101,11 +110,11 @@ struct Experiment {
     #[serde(default)]
     eval: EvalConfig,
     /// The radiance field, `kind = "grid"` or `"mlp"`.
-    #[serde(rename = "field")]
-    _field: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "field", default)]
+    _field: serde::de::IgnoredAny,
     /// PoseNet's settings ([`PoseNetConfig`]).
-    #[serde(rename = "posenet")]
-    _posenet: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "posenet", default)]
+    _posenet: serde::de::IgnoredAny,
 }
 
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
@@ -337,19 +346,18 @@ struct Recording {
     note: String,
 }
 
-fn synthetic_recording(exp: &Experiment) -> anyhow::Result<Recording> {
-    let s = &exp.simulation;
+/// The simulation `[simulation]` describes, checked.
+fn synthetic_config(s: &SimulationConfig) -> anyhow::Result<SyntheticEventsConfig> {
     if s.width == 0 || s.height == 0 || !(s.fov_x_deg > 0.0 && s.fov_x_deg < 180.0) {
         bail!("[simulation]: need width, height ≥ 1 and 0 < fov_x_deg < 180");
     }
-    let turntable = Turntable {
-        radius: s.radius,
-        height: s.camera_height,
-        duration_secs: s.duration_secs,
-        ..Turntable::default()
-    };
     let config = SyntheticEventsConfig {
-        turntable: turntable.clone(),
+        turntable: Turntable {
+            radius: s.radius,
+            height: s.camera_height,
+            duration_secs: s.duration_secs,
+            ..Turntable::default()
+        },
         camera: PinholeCamera::from_fov_x(s.width, s.height, s.fov_x_deg.to_radians()),
         render_steps: s.render_steps,
         supersample: s.supersample,
@@ -364,6 +372,14 @@ fn synthetic_recording(exp: &Experiment) -> anyhow::Result<Recording> {
             ..SimulatorConfig::default()
         },
     };
+    config.validate().context("[simulation]")?;
+    Ok(config)
+}
+
+fn synthetic_recording(exp: &Experiment) -> anyhow::Result<Recording> {
+    let s = &exp.simulation;
+    let config = synthetic_config(s)?;
+    let turntable = config.turntable.clone();
     let (scene, _) = simulate_eventnerf_scene(&SyntheticScene::object_centric(), &config)
         .context("[simulation]")?;
     Ok(Recording {
@@ -491,11 +507,6 @@ fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
     }
 }
 
-fn posenet(input: &TaskInput, range: TimeRange) -> anyhow::Result<Box<dyn PoseField>> {
-    let config = PoseNetConfig::from_section(&input.config.section("posenet"), input.run.seed)?;
-    Ok(Box::new(config.init::<f32>(range)?))
-}
-
 /// Everything the units share.
 struct Setup<'a> {
     input: &'a TaskInput<'a>,
@@ -506,6 +517,7 @@ struct Setup<'a> {
     settings: RenderSettings,
     iterations: usize,
     threshold: f64,
+    posenet: Option<PoseNetConfig>,
     /// Where windows are drawn: the recording's span where there are events, seconds.
     span: [f64; 2],
     /// Where poses are compared with the truth, and the truth there.
@@ -520,6 +532,9 @@ fn render_settings(r: &RenderConfig) -> anyhow::Result<(RenderSettings, SceneBou
     let radius = r
         .scene_radius
         .unwrap_or_else(|| SyntheticScene::object_centric().bounding_radius());
+    if !(radius.is_finite() && radius > 0.0) {
+        bail!("[render] scene_radius = {radius}: expected a finite radius > 0");
+    }
     let bounds = SceneBounds {
         centre: [0.0; 3],
         radius,
@@ -541,37 +556,86 @@ fn render_settings(r: &RenderConfig) -> anyhow::Result<(RenderSettings, SceneBou
     Ok((settings, bounds))
 }
 
-fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let exp: Experiment = input.config.parse_params()?;
-    let field = RadianceFieldConfig::from_section(&input.config.section("field"), input.run.seed)?;
-    let (settings, bounds) = render_settings(&exp.render)?;
-    let train = &exp.train;
-    let threshold = train.threshold.unwrap_or(exp.simulation.threshold);
-    if !(threshold > 0.0 && train.eps > 0.0) {
-        bail!("[train]: need threshold > 0 and eps > 0");
-    }
-    let timing = PoseTiming {
-        hold: train.pose_hold,
-        warmup: train.pose_warmup,
-        rotation_warmup: train.pose_warmup,
-    };
-    timing.steps(input.run.iterations(train.iterations))?;
-    let mut methods: Vec<Method> = Vec::new();
-    for &m in &train.methods {
-        if !methods.contains(&m) {
-            methods.push(m);
+/// The whole config, decoded and checked before the recording is read or simulated.
+#[derive(Debug)]
+struct Settings {
+    exp: Experiment,
+    field: RadianceFieldConfig,
+    render: RenderSettings,
+    bounds: SceneBounds,
+    /// The loss' contrast threshold.
+    threshold: f64,
+    /// `[train] methods` without repeats.
+    methods: Vec<Method>,
+    iterations: usize,
+    /// `[posenet]`, when PoseNet runs.
+    posenet: Option<PoseNetConfig>,
+}
+
+impl Settings {
+    fn new(config: &Config, run: &RunConfig) -> anyhow::Result<Self> {
+        let exp: Experiment = config.parse_params()?;
+        let field = RadianceFieldConfig::from_section(&config.section("field"), run.seed)?;
+        let (render, bounds) = render_settings(&exp.render)?;
+        if exp.data.source == Source::Synthetic {
+            synthetic_config(&exp.simulation)?;
         }
+        let train = &exp.train;
+        let threshold = train.threshold.unwrap_or(exp.simulation.threshold);
+        if !(threshold > 0.0 && train.eps > 0.0) {
+            bail!("[train]: need threshold > 0 and eps > 0");
+        }
+        let iterations = run.iterations(train.iterations);
+        PoseTiming {
+            hold: train.pose_hold,
+            warmup: train.pose_warmup,
+            rotation_warmup: train.pose_warmup,
+        }
+        .steps(iterations)?;
+        let mut methods: Vec<Method> = Vec::new();
+        for &m in &train.methods {
+            if !methods.contains(&m) {
+                methods.push(m);
+            }
+        }
+        if methods.is_empty() {
+            bail!("[train] methods: no methods to run");
+        }
+        let posenet = methods
+            .contains(&Method::Posenet)
+            .then(|| PoseNetConfig::from_section(&config.section("posenet"), run.seed))
+            .transpose()?;
+        Ok(Self {
+            exp,
+            field,
+            render,
+            bounds,
+            threshold,
+            methods,
+            iterations,
+            posenet,
+        })
     }
-    if methods.is_empty() {
-        bail!("[train] methods: no methods to run");
-    }
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let Settings {
+        exp,
+        field,
+        render: settings,
+        bounds,
+        threshold,
+        methods,
+        iterations,
+        posenet,
+    } = Settings::new(input.config, input.run)?;
+    let train = &exp.train;
     let started = Instant::now();
     let rec = match exp.data.source {
         Source::Synthetic => synthetic_recording(&exp)?,
         Source::Eventnerf => eventnerf_recording(&exp)?,
     };
     let conditions = conditions(&exp, &rec)?;
-    let iterations = input.run.iterations(train.iterations);
     let camera = rec.scene.camera;
     input.run_dir.log(format_args!(
         "{} events of a {}×{} sensor over {:.2} s ({}; {:.1} s to load); {} held-out views; conditions {:?}; methods {:?}; {} steps of {} ray pairs in {} windows",
@@ -616,6 +680,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         settings,
         iterations,
         threshold,
+        posenet,
         span,
         eval_times,
         truth,
@@ -679,7 +744,11 @@ fn run_method(
         Method::Posenet => {
             let range = TimeRange::new(0.0, rec.duration)
                 .context("the recording needs a positive duration")?;
-            Some(posenet(input, range)?)
+            let config = setup
+                .posenet
+                .as_ref()
+                .context("[posenet] decoded for PoseNet")?;
+            Some(Box::new(config.init::<f32>(range)?) as Box<dyn PoseField>)
         }
         _ => None,
     };
@@ -919,4 +988,16 @@ fn evaluate(
         final_loss,
         iterations,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `cpose config show events` states the defaults: its values are those of an empty config.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"events\"\n";
+        cpose_core::testing::check_default_config("events", required, Settings::new);
+    }
 }

@@ -17,15 +17,15 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use cpose_core::gravity_world;
 use cpose_core::registry::{Task, TaskInput};
+use cpose_core::{Config, RunConfig, gravity_world};
 use cpose_slam::data::{RgbdSequence, read_replica};
 use cpose_slam::map::MapConfig;
 use cpose_slam::slam::{MappingConfig, TrackingConfig};
 use cpose_slam::synth::{RoomConfig, fit_in_room, render_room};
 use cpose_slam::task::{
-    BoundsConfig, DataConfig, MeshConfig, ModelFactory, SlamConfig, SlamSetup, ensure_generated,
-    frame_range, open_sequence, run_methods,
+    BoundsConfig, DataConfig, MeshConfig, ModelFactory, SlamConfig, SlamSetup, Source,
+    ensure_generated, frame_range, open_sequence, run_methods,
 };
 use cpose_slam::track::{FreePose, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference};
 use nalgebra::{Isometry3, Vector3};
@@ -40,6 +40,10 @@ inventory::submit! {
     Task {
         name: "slam_imu",
         about: "RGB-D neural SLAM with an IMU (paper §3.4): PoseNet tracking with loose, tight and accelerometer coupling vs none and NICE-SLAM's free pose",
+        default_config: || {
+            [include_str!("../defaults/slam_imu.toml"), &cpose_slam::task::default_tables()].join("\n")
+        },
+        check: |config, run| Settings::new(config, run).map(drop),
         run,
     }
 }
@@ -126,28 +130,39 @@ const ADIS16448: NoiseModel = NoiseModel {
     initial_accel_bias: Vector3::new(0.0, 0.0, 0.0),
 };
 
+/// A tracking method, by its key in configs and `metrics.json`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
+#[serde(try_from = "String")]
 enum Method {
     Baseline,
     Prev,
     /// `prev` with the gyroscope's rotation over each frame interval ([`RelativeImu`]).
-    #[serde(rename = "prev_loose")]
     PrevLoose,
     /// `prev` with the gyroscope on the rate of its increments.
-    #[serde(rename = "prev_tight")]
     PrevTight,
     /// `prev` with the accelerometer's displacement over each frame interval.
-    #[serde(rename = "prev_accel")]
     PrevAccel,
     /// `prev_tight` and `prev_accel`.
-    #[serde(rename = "prev_combined")]
     PrevCombined,
-    #[serde(untagged)]
+    /// The absolute PoseNet with the IMU in tracking ([`ImuPoseNet`]).
     Imu(ImuMode),
 }
 
 impl Method {
+    const ALL: [Method; 11] = [
+        Method::Baseline,
+        Method::Prev,
+        Method::PrevLoose,
+        Method::PrevTight,
+        Method::PrevAccel,
+        Method::PrevCombined,
+        Method::Imu(ImuMode::None),
+        Method::Imu(ImuMode::Loose),
+        Method::Imu(ImuMode::Tight),
+        Method::Imu(ImuMode::Accel),
+        Method::Imu(ImuMode::Combined),
+    ];
+
     fn key(self) -> &'static str {
         match self {
             Method::Baseline => "baseline",
@@ -158,6 +173,23 @@ impl Method {
             Method::PrevCombined => "prev_combined",
             Method::Imu(mode) => mode.key(),
         }
+    }
+}
+
+impl TryFrom<String> for Method {
+    type Error = String;
+
+    fn try_from(name: String) -> Result<Self, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.key() == name)
+            .ok_or_else(|| {
+                let known: Vec<_> = Method::ALL.iter().map(|m| m.key()).collect();
+                format!(
+                    "unknown method {name:?}; known methods: {}",
+                    known.join(", ")
+                )
+            })
     }
 }
 
@@ -183,7 +215,7 @@ fn euroc_room(
         bail!("[synthetic] trajectory cannot be combined with [euroc]: the flight is the motion");
     }
     room.validate()
-        .map_err(|m| anyhow::anyhow!("[synthetic] {m}"))?;
+        .map_err(|m| anyhow::anyhow!("[synthetic]: {m}"))?;
     let seq = EurocSequence::load(&config.path)?;
     let gt = &seq.ground_truth;
     if gt.len() < 2 || seq.imu.len() < 2 {
@@ -327,10 +359,7 @@ fn check_coverage(imu: &[ImuSample], frame_times: &[f64], max_gap: f64) -> anyho
 const MAX_IMU_RATE_HZ: f64 = 10_000.0;
 
 fn simulated(exp: &Experiment, input: &TaskInput) -> anyhow::Result<ImuRgbd> {
-    let rate_hz = exp.imu_sim.rate_hz;
-    if !(rate_hz > 0.0 && rate_hz <= MAX_IMU_RATE_HZ) {
-        bail!("[imu_sim] rate_hz = {rate_hz}: expected a rate in (0, {MAX_IMU_RATE_HZ}] Hz");
-    }
+    check_imu_rate(exp.imu_sim.rate_hz)?;
     let seq = open_sequence(&exp.data, &exp.synthetic, input)?;
     let times = seq.times();
     let poses: Vec<Isometry3<f64>> = seq
@@ -385,23 +414,53 @@ fn simulated(exp: &Experiment, input: &TaskInput) -> anyhow::Result<ImuRgbd> {
     })
 }
 
-fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let exp: Experiment = input.config.parse_params()?;
-    if exp.slam.methods.is_empty() {
-        bail!(
-            "slam.methods is empty: name at least one of baseline, prev, prev_loose, \
-             prev_tight, prev_accel, prev_combined, none, loose, tight, accel, combined"
-        );
+/// The whole config, decoded and checked before any frame or IMU reading is read or made.
+#[derive(Debug)]
+struct Settings {
+    exp: Experiment,
+    setup: SlamSetup,
+}
+
+impl Settings {
+    fn new(config: &Config, run: &RunConfig) -> anyhow::Result<Self> {
+        let exp: Experiment = config.parse_params()?;
+        if exp.slam.methods.is_empty() {
+            bail!(
+                "slam.methods is empty: name at least one of baseline, prev, prev_loose, \
+                 prev_tight, prev_accel, prev_combined, none, loose, tight, accel, combined"
+            );
+        }
+        exp.imu.validate()?;
+        if exp.euroc.is_some() || exp.data.source == Source::Synthetic {
+            exp.synthetic
+                .validate()
+                .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))?;
+        }
+        if exp.euroc.is_none() {
+            check_imu_rate(exp.imu_sim.rate_hz)?;
+        }
+        let setup = SlamSetup::new(
+            run,
+            exp.map.clone(),
+            exp.tracking.clone(),
+            exp.mapping.clone(),
+            &exp.bounds,
+            &exp.mesh,
+        )?;
+        Ok(Self { exp, setup })
     }
-    exp.imu.validate()?;
-    let mut setup = SlamSetup::new(
-        input,
-        exp.map.clone(),
-        exp.tracking.clone(),
-        exp.mapping.clone(),
-        &exp.bounds,
-        &exp.mesh,
-    )?;
+}
+
+/// `[imu_sim] rate_hz`, checked.
+fn check_imu_rate(rate_hz: f64) -> anyhow::Result<()> {
+    if !(rate_hz > 0.0 && rate_hz <= MAX_IMU_RATE_HZ) {
+        bail!("[imu_sim] rate_hz = {rate_hz}: expected a rate in (0, {MAX_IMU_RATE_HZ}] Hz");
+    }
+    Ok(())
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let Settings { exp, mut setup } = Settings::new(input.config, input.run)?;
     let data = match &exp.euroc {
         Some(euroc) => euroc_room(euroc, &exp.data, &exp.synthetic, input)?,
         None => simulated(&exp, input)?,
@@ -484,6 +543,16 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `cpose config show slam_imu` states the defaults: its values are those of a config with
+    /// only the keys that have none.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"slam_imu\"\n[data]\nsource = \"synthetic\"\n\
+                        path = \"data/synthetic_room\"\n[slam]\n\
+                        methods = [\"baseline\", \"prev\", \"prev_tight\", \"none\", \"loose\", \"tight\"]\n";
+        cpose_core::testing::check_default_config("slam_imu", required, Settings::new);
+    }
 
     fn readings(times: &[f64]) -> Vec<ImuSample> {
         times

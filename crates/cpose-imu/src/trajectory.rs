@@ -26,7 +26,7 @@ use cpose_core::nn::{Adam, Convergence, StopReason, StopRule};
 use cpose_core::plot::{self, Line, Panel, SeriesStyle, TrajectorySeries, YScale};
 use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
-use cpose_core::registry::{FieldContext, Task, TaskInput, build_pose_field};
+use cpose_core::registry::{self, FieldContext, Task, TaskInput, build_pose_field};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -44,6 +44,8 @@ inventory::submit! {
     Task {
         name: "trajectory",
         about: "fit pose fields to a trajectory from a subset of its poses (optionally with gyro/accel) and score held-out poses",
+        default_config: || include_str!("../defaults/trajectory.toml").to_owned(),
+        check: |config, _| Settings::new(config).map(drop),
         run,
     }
 }
@@ -100,6 +102,35 @@ struct DataConfig {
     /// Keep every N-th pose as supervision; the others are held out (default 20).
     #[serde(default = "default_known_every")]
     known_every: usize,
+}
+
+impl DataConfig {
+    /// The synthetic source's rates and duration, checked before anything is allocated.
+    fn check_synthetic(&self, config: &Config) -> anyhow::Result<()> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(positive(self.duration_secs)
+            && positive(self.pose_rate_hz)
+            && positive(self.imu_rate_hz))
+        {
+            bail!(
+                "{}: [data] duration_secs = {}, pose_rate_hz = {} and imu_rate_hz = {} must be \
+                 positive finite numbers",
+                config.path().display(),
+                self.duration_secs,
+                self.pose_rate_hz,
+                self.imu_rate_hz
+            );
+        }
+        let samples = self.duration_secs * self.pose_rate_hz.max(self.imu_rate_hz);
+        if samples > MAX_SYNTHETIC_SAMPLES as f64 {
+            bail!(
+                "{}: [data] duration_secs × the larger of pose_rate_hz and imu_rate_hz is \
+                 {samples:.3e} samples; at most {MAX_SYNTHETIC_SAMPLES} are generated",
+                config.path().display()
+            );
+        }
+        Ok(())
+    }
 }
 
 fn default_duration() -> f64 {
@@ -214,6 +245,18 @@ impl FitConfig {
                 return Err(format!("{key} = {value} must be a positive number"));
             }
         }
+        for (key, value) in [
+            ("pose_weight", self.pose_weight),
+            ("gyro_weight", self.gyro_weight),
+            ("accel_weight", self.accel_weight),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!("{key} = {value} must be a number ≥ 0"));
+            }
+        }
+        if self.imu_batch == 0 {
+            return Err("imu_batch = 0 must be at least 1".into());
+        }
         Ok(())
     }
 }
@@ -251,29 +294,7 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
     };
     Ok(match data.source {
         Source::Synthetic => {
-            let positive = |v: f64| v.is_finite() && v > 0.0;
-            if !(positive(data.duration_secs)
-                && positive(data.pose_rate_hz)
-                && positive(data.imu_rate_hz))
-            {
-                bail!(
-                    "{}: [data] duration_secs = {}, pose_rate_hz = {} and imu_rate_hz = {} must \
-                     be positive finite numbers",
-                    config.path().display(),
-                    data.duration_secs,
-                    data.pose_rate_hz,
-                    data.imu_rate_hz
-                );
-            }
-            // Sizes are checked before anything is allocated.
-            let samples = data.duration_secs * data.pose_rate_hz.max(data.imu_rate_hz);
-            if samples > MAX_SYNTHETIC_SAMPLES as f64 {
-                bail!(
-                    "{}: [data] duration_secs × the larger of pose_rate_hz and imu_rate_hz is \
-                     {samples:.3e} samples; at most {MAX_SYNTHETIC_SAMPLES} are generated",
-                    config.path().display()
-                );
-            }
+            data.check_synthetic(config)?;
             let range = TimeRange::new(0.0, data.duration_secs).context("duration_secs")?;
             let motion = SinusoidMotion::<f64>::handheld(range, seed);
             let sample = |rate: f64| -> Vec<f64> {
@@ -918,13 +939,72 @@ impl Fit<'_> {
 /// The method key of the interpolation reference.
 const INTERP: &str = "interp";
 
+/// The whole config, decoded and checked before the trajectory is read or generated.
+#[derive(Debug)]
+struct Settings {
+    exp: Experiment,
+    /// The names of the fields to fit.
+    fitted: Vec<String>,
+}
+
+impl Settings {
+    fn new(config: &Config) -> anyhow::Result<Self> {
+        let exp: Experiment = config.parse_params()?;
+        exp.fit
+            .validate()
+            .map_err(|e| anyhow::anyhow!("{}: [fit] {e}", config.path().display()))?;
+        if exp.fit.imu.contains(&ImuMode::Loose)
+            && !(exp.fit.loose_window_secs > 0.0 && exp.fit.loose_window_secs.is_finite())
+        {
+            bail!(
+                "{}: [fit] loose_window_secs = {} must be a positive number of seconds",
+                config.path().display(),
+                exp.fit.loose_window_secs
+            );
+        }
+        if exp.fields.is_empty() {
+            bail!(
+                "{}: no pose fields to fit; add a table such as [fields.posenet] with kind = \"posenet\"",
+                config.path().display()
+            );
+        }
+        let fitted: Vec<String> = match &exp.fit.fields {
+            None => exp.fields.keys().cloned().collect(),
+            Some(names) => {
+                if let Some(unknown) = names.iter().find(|n| !exp.fields.contains_key(*n)) {
+                    bail!(
+                        "{}: [fit] fields names {unknown:?}, which has no [fields.{unknown}] table \
+                     (tables: {})",
+                        config.path().display(),
+                        exp.fields.keys().cloned().collect::<Vec<_>>().join(", ")
+                    );
+                }
+                names.clone()
+            }
+        };
+        if exp.fields.contains_key(INTERP) {
+            bail!(
+                "{}: [fields.{INTERP}] is the name of the interpolation reference; call the field otherwise",
+                config.path().display()
+            );
+        }
+        if exp.data.source == Source::Synthetic {
+            exp.data.check_synthetic(config)?;
+        }
+        for name in &fitted {
+            let section = config.section(&format!("fields.{name}"));
+            let (kind, at) = section.kind()?;
+            registry::find_pose_field(&kind)
+                .map_err(|e| config.error_at(Some(at), e.to_string()))?;
+        }
+        Ok(Self { exp, fitted })
+    }
+}
+
 fn run(input: &TaskInput) -> anyhow::Result<()> {
     let config = input.config;
-    let exp: Experiment = config.parse_params()?;
     let seed = input.run.seed;
-    exp.fit
-        .validate()
-        .map_err(|e| anyhow::anyhow!("{}: [fit] {e}", config.path().display()))?;
+    let Settings { exp, fitted } = Settings::new(config)?;
     let seq = Sequence::new(config, &exp.data, seed)?;
     if seq.imu.is_empty() && exp.fit.imu.iter().any(|m| *m != ImuMode::None) {
         bail!(
@@ -932,41 +1012,6 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             config.path().display(),
             exp.fit.imu,
             exp.data.source
-        );
-    }
-    if exp.fit.imu.contains(&ImuMode::Loose)
-        && !(exp.fit.loose_window_secs > 0.0 && exp.fit.loose_window_secs.is_finite())
-    {
-        bail!(
-            "{}: [fit] loose_window_secs = {} must be a positive number of seconds",
-            config.path().display(),
-            exp.fit.loose_window_secs
-        );
-    }
-    if exp.fields.is_empty() {
-        bail!(
-            "{}: no pose fields to fit; add a table such as [fields.posenet] with kind = \"posenet\"",
-            config.path().display()
-        );
-    }
-    let fitted: Vec<String> = match &exp.fit.fields {
-        None => exp.fields.keys().cloned().collect(),
-        Some(names) => {
-            if let Some(unknown) = names.iter().find(|n| !exp.fields.contains_key(*n)) {
-                bail!(
-                    "{}: [fit] fields names {unknown:?}, which has no [fields.{unknown}] table \
-                     (tables: {})",
-                    config.path().display(),
-                    exp.fields.keys().cloned().collect::<Vec<_>>().join(", ")
-                );
-            }
-            names.clone()
-        }
-    };
-    if exp.fields.contains_key(INTERP) {
-        bail!(
-            "{}: [fields.{INTERP}] is the name of the interpolation reference; call the field otherwise",
-            config.path().display()
         );
     }
     let known_poses: Vec<Isometry3<f64>> = seq.known.iter().map(|&i| seq.poses[i]).collect();
@@ -1113,6 +1158,18 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `cpose config show trajectory` states the defaults: its values are those of a config
+    /// with only the keys that have none.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"trajectory\"\n[data]\nsource = \"synthetic\"\n\
+                        [fields.posenet]\nkind = \"posenet\"\n[fields.spline]\nkind = \"spline\"\n\
+                        [fields.lie_spline]\nkind = \"lie_spline\"\n";
+        cpose_core::testing::check_default_config("trajectory", required, |config, _| {
+            Settings::new(config)
+        });
+    }
 
     fn synthetic(known_every: usize) -> (Config, DataConfig) {
         let config = Config::from_text("test.toml", "task = \"trajectory\"\n");

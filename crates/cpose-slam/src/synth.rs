@@ -103,6 +103,9 @@ impl RoomConfig {
         }
     }
 
+    /// The `[synthetic]` table at the defaults, commented, for tasks' default configs.
+    pub const DEFAULT_TABLE: &str = include_str!("../defaults/room.toml");
+
     /// Checks the values; the message names the key.
     pub fn validate(&self) -> Result<(), String> {
         if !(16..=4096).contains(&self.width) {

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context as _;
+use cpose_core::Config;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, UnitKey};
 use serde::Deserialize;
@@ -17,6 +18,8 @@ inventory::submit! {
     Task {
         name: "synth_room",
         about: "write the synthetic RGB-D room (colour, noisy depth, true poses) in Replica's layout",
+        default_config: || [include_str!("../defaults/synth_room.toml"), RoomConfig::DEFAULT_TABLE].join("\n"),
+        check: |config, _| Experiment::new(config).map(drop),
         run,
     }
 }
@@ -37,8 +40,19 @@ struct Output {
     path: PathBuf,
 }
 
+impl Experiment {
+    /// The config, decoded and checked.
+    fn new(config: &Config) -> anyhow::Result<Self> {
+        let exp: Self = config.parse_params()?;
+        exp.synthetic
+            .validate()
+            .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))?;
+        Ok(exp)
+    }
+}
+
 fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let exp: Experiment = input.config.parse_params()?;
+    let exp = Experiment::new(input.config)?;
     // One unit: the room, written (again, on a resume that finds it unfinished) as a whole.
     let unit = UnitKey::new("room", "synthetic", input.run.seed);
     Study::new(input, vec![unit])
@@ -76,4 +90,19 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 .with("path", &exp.output.path))
         })?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `cpose config show synth_room` states the defaults: its values are those of a config
+    /// with only the output folder.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"synth_room\"\n[output]\npath = \"data/synthetic_room\"\n";
+        cpose_core::testing::check_default_config("synth_room", required, |config, _| {
+            Experiment::new(config)
+        });
+    }
 }

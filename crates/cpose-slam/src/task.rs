@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context as _, bail};
-use cpose_core::TimeRange;
 use cpose_core::eval::{
     Alignment, AteReport, RpeDelta, Trajectory, align_poses, ate, rpe_report, write_tum,
 };
@@ -20,6 +19,7 @@ use cpose_core::geometry::rotation_angle_between;
 use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
+use cpose_core::{Config, PoseNetConfig, RunConfig, TimeRange};
 use cpose_nerf::field3d::SceneBounds;
 use cpose_nerf::image::Image;
 use cpose_nerf::mesh::Grid;
@@ -44,6 +44,8 @@ inventory::submit! {
     Task {
         name: "slam",
         about: "RGB-D neural SLAM (paper §4.3): NICE-SLAM's free-pose tracking vs PoseNet (previous camera, world, random reference) and the intrinsic motion frame",
+        default_config: || [include_str!("../defaults/slam.toml"), &default_tables()].join("\n"),
+        check: |config, run| Settings::new(config, run).map(drop),
         run,
     }
 }
@@ -396,21 +398,47 @@ pub fn ensure_generated(
     Ok(())
 }
 
-fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let exp: Experiment = input.config.parse_params()?;
-    if exp.slam.methods.is_empty() {
-        bail!(
-            "slam.methods is empty: name at least one of baseline, prev, world, random, intrinsic"
-        );
+/// The whole config, decoded and checked before any frame is read or generated.
+#[derive(Debug)]
+struct Settings {
+    exp: Experiment,
+    setup: SlamSetup,
+}
+
+impl Settings {
+    fn new(config: &Config, run: &RunConfig) -> anyhow::Result<Self> {
+        let exp: Experiment = config.parse_params()?;
+        let methods = &exp.slam.methods;
+        if methods.is_empty() {
+            bail!(
+                "slam.methods is empty: name at least one of baseline, prev, world, random, \
+                 intrinsic"
+            );
+        }
+        if exp.data.source == Source::Synthetic {
+            exp.synthetic
+                .validate()
+                .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))?;
+        }
+        let setup = SlamSetup::new(
+            run,
+            exp.map.clone(),
+            exp.tracking.clone(),
+            exp.mapping.clone(),
+            &exp.bounds,
+            &exp.mesh,
+        )?;
+        if methods.iter().any(|&m| m != Method::Baseline) {
+            // The networks' sizes, checked by building one over a unit time range.
+            let unit = TimeRange::new(0.0, 1.0).context("a unit time range")?;
+            PoseNetTracker::new(&exp.posenet, Reference::Previous, unit, run.seed)?;
+        }
+        Ok(Self { exp, setup })
     }
-    let setup = SlamSetup::new(
-        input,
-        exp.map,
-        exp.tracking,
-        exp.mapping,
-        &exp.bounds,
-        &exp.mesh,
-    )?;
+}
+
+fn run(input: &TaskInput) -> anyhow::Result<()> {
+    let Settings { exp, setup } = Settings::new(input.config, input.run)?;
     let seq = open_sequence(&exp.data, &exp.synthetic, input)?.every(exp.data.stride);
     let n = exp.data.frames_of(seq.len());
     let range = frame_range(&seq, n)?;
@@ -452,6 +480,19 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The tables every SLAM task shares at their defaults, commented: `[bounds]`, `[map]`,
+/// `[tracking]`, `[mapping]`, `[posenet]` (its network as `[posenet.network]`), `[mesh]` and
+/// the synthetic room's `[synthetic]`.
+pub fn default_tables() -> String {
+    let network = PoseNetConfig::DEFAULT_TABLE.replacen("[posenet]", "[posenet.network]", 1);
+    [
+        include_str!("../defaults/slam_tables.toml"),
+        &network,
+        RoomConfig::DEFAULT_TABLE,
+    ]
+    .join("\n")
+}
+
 /// The time span of the first `n ≥ 2` frames of `seq` (a pose field's domain).
 pub fn frame_range(seq: &RgbdSequence, n: usize) -> anyhow::Result<TimeRange> {
     if n < 2 || seq.len() < n {
@@ -469,6 +510,7 @@ pub fn frame_range(seq: &RgbdSequence, n: usize) -> anyhow::Result<TimeRange> {
 /// What every SLAM task shares besides its frames and pose models: the map, tracking and
 /// mapping settings (optimiser steps already scaled by `run.iterations_scale`), the map's region,
 /// and the mesh grid.
+#[derive(Debug)]
 pub struct SlamSetup {
     /// `[map]`.
     pub map: MapConfig,
@@ -488,7 +530,7 @@ impl SlamSetup {
     /// Checks and assembles the settings; `run.iterations_scale` scales the optimiser steps
     /// (at least one each).
     pub fn new(
-        input: &TaskInput,
+        run: &RunConfig,
         map: MapConfig,
         mut tracking: TrackingConfig,
         mut mapping: MappingConfig,
@@ -500,8 +542,9 @@ impl SlamSetup {
             &mut mapping.iterations,
             &mut mapping.first_iterations,
         ] {
-            *steps = input.run.iterations(*steps).max(1);
+            *steps = run.iterations(*steps).max(1);
         }
+        let scene_bounds = bounds.scene_bounds()?;
         // 0 turns the mesh off; a negative or non-finite size is an error (`Grid::covering`).
         let mesh = if mesh.voxel != 0.0 {
             let (min, max) = bounds.mesh_box()?;
@@ -514,7 +557,7 @@ impl SlamSetup {
             map,
             tracking,
             mapping,
-            bounds: bounds.scene_bounds()?,
+            bounds: scene_bounds,
             mesh,
             body_from_camera: Isometry3::identity(),
         })
@@ -893,4 +936,19 @@ fn save_view(slam: &mut Slam, seq: &RgbdSequence, index: usize, unit: &Unit) -> 
     });
     side.save_png(unit.file("view", "png"))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `cpose config show slam` states the defaults: its values are those of a config with only
+    /// the keys that have none.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"slam\"\n[data]\nsource = \"synthetic\"\n\
+                        path = \"data/synthetic_room\"\n[slam]\n\
+                        methods = [\"baseline\", \"prev\", \"world\", \"random\", \"intrinsic\"]\n";
+        cpose_core::testing::check_default_config("slam", required, Settings::new);
+    }
 }

@@ -105,6 +105,9 @@ pub fn bands_for_spacing(range: TimeRange, spacing_secs: f64, time_span: f64) ->
 }
 
 impl PoseNetConfig {
+    /// The `[posenet]` table at the defaults, commented, for tasks' default configs.
+    pub const DEFAULT_TABLE: &str = include_str!("../../defaults/posenet.toml");
+
     /// The settings of a config table (defaults when it is absent), the seed offset by the
     /// run's `seed`.
     pub fn from_section(

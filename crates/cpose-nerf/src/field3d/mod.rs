@@ -263,6 +263,9 @@ impl Default for RadianceFieldConfig {
 }
 
 impl RadianceFieldConfig {
+    /// The `[field]` table at the defaults, commented, for tasks' default configs.
+    pub const DEFAULT_TABLE: &str = include_str!("../../defaults/radiance_field.toml");
+
     /// The field of a config table (default: the hash grid when the table is absent), its
     /// seed offset by the run's `seed`.
     pub fn from_section(

@@ -62,7 +62,7 @@ use cpose_core::nn::ExponentialDecay;
 use cpose_core::plot;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
-use cpose_core::{FieldContext, PoseField, PoseNetConfig, TimeRange};
+use cpose_core::{Config, FieldContext, PoseField, PoseNetConfig, RunConfig, TimeRange};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -83,8 +83,20 @@ inventory::submit! {
     Task {
         name: "nerf",
         about: "NeRF from noisy or unknown poses (paper §4.1.2): PoseNet vs BARF vs B-spline",
+        default_config,
+        check: |config, run| Settings::new(config, run).map(drop),
         run,
     }
+}
+
+/// The task's defaults: `cpose config show nerf`.
+fn default_config() -> String {
+    [
+        include_str!("../../defaults/nerf.toml"),
+        RadianceFieldConfig::DEFAULT_TABLE,
+        PoseNetConfig::DEFAULT_TABLE,
+    ]
+    .join("\n")
 }
 
 /// The config file of the task.
@@ -102,14 +114,14 @@ struct Experiment {
     #[serde(default)]
     eval: EvalConfig,
     /// The pose noise, decoded by kind.
-    #[serde(rename = "noise")]
-    _noise: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "noise", default)]
+    _noise: serde::de::IgnoredAny,
     /// The radiance field, `kind = "grid"` or `"mlp"`.
-    #[serde(rename = "field")]
-    _field: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "field", default)]
+    _field: serde::de::IgnoredAny,
     /// PoseNet's settings ([`PoseNetConfig`]).
-    #[serde(rename = "posenet")]
-    _posenet: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "posenet", default)]
+    _posenet: serde::de::IgnoredAny,
 }
 
 /// A pose model, named as in `metrics.json`.
@@ -258,7 +270,7 @@ fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
 
 fn correction(
     method: Method,
-    input: &TaskInput,
+    posenet: Option<&PoseNetConfig>,
     views: &Views,
     train: &TrainConfig,
     seed: u64,
@@ -269,7 +281,7 @@ fn correction(
     Ok(match method {
         Method::TruePoses | Method::Fixed => None,
         Method::Posenet => {
-            let config = PoseNetConfig::from_section(&input.config.section("posenet"), seed)?;
+            let config = posenet.context("[posenet] is decoded when PoseNet runs")?;
             Some(Box::new(config.init::<f32>(range)?))
         }
         Method::Barf => Some(Box::new(cpose_core::DiscretePoses::<f32>::new(times)?)),
@@ -292,29 +304,78 @@ fn correction(
     })
 }
 
+/// The whole config, decoded and checked: every table, before any data is read.
+#[derive(Debug)]
+struct Settings {
+    exp: Experiment,
+    noise: PoseNoise,
+    field_config: RadianceFieldConfig,
+    /// `[posenet]`, when a method uses it.
+    posenet: Option<PoseNetConfig>,
+    iterations: usize,
+    /// Steps of the pose hold, the pose warm-up and PoseNet's rotation warm-up.
+    pose_steps: (u64, u64, u64),
+}
+
+impl Settings {
+    fn new(config: &Config, run: &RunConfig) -> anyhow::Result<Self> {
+        let exp: Experiment = config.parse_params()?;
+        if exp.data.source == Source::Synthetic {
+            exp.orbit.validate()?;
+        }
+        let noise_section = config.section("noise");
+        let field_config = RadianceFieldConfig::from_section(&config.section("field"), run.seed)?;
+        let noise: PoseNoise = if noise_section.exists()? {
+            noise_section.decode()?
+        } else if exp.data.source == Source::Llff {
+            PoseNoise::Identity {}
+        } else {
+            PoseNoise::default()
+        };
+        noise.validate()?;
+        let train = &exp.train;
+        if train.rays_per_step == 0 {
+            bail!("[train] rays_per_step = 0: expected at least 1");
+        }
+        if !(0.0..=1.0).contains(&train.field_restart_until) {
+            bail!(
+                "[train] field_restart_until = {} must lie in [0, 1] (a fraction of the steps)",
+                train.field_restart_until
+            );
+        }
+        let iterations = run.iterations(train.iterations);
+        let pose_steps = PoseTiming {
+            hold: train.pose_hold,
+            warmup: train.pose_warmup,
+            rotation_warmup: train.rotation_warmup.unwrap_or(train.pose_warmup),
+        }
+        .steps(iterations)?;
+        let posenet = train
+            .methods
+            .contains(&Method::Posenet)
+            .then(|| PoseNetConfig::from_section(&config.section("posenet"), run.seed))
+            .transpose()?;
+        Ok(Self {
+            exp,
+            noise,
+            field_config,
+            posenet,
+            iterations,
+            pose_steps,
+        })
+    }
+}
+
 fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let exp: Experiment = input.config.parse_params()?;
-    let noise_section = input.config.section("noise");
-    let field_config =
-        RadianceFieldConfig::from_section(&input.config.section("field"), input.run.seed)?;
+    let Settings {
+        exp,
+        noise,
+        field_config,
+        posenet,
+        iterations,
+        pose_steps: (hold, warmup, rotation_warmup),
+    } = Settings::new(input.config, input.run)?;
     let mut views = Views::load(&exp.data, &exp.orbit, &exp.render)?;
-    let noise: PoseNoise = if noise_section.exists()? {
-        noise_section.decode()?
-    } else if exp.data.source == Source::Llff {
-        PoseNoise::Identity {}
-    } else {
-        PoseNoise::default()
-    };
-    noise.validate()?;
-    if exp.train.rays_per_step == 0 {
-        bail!("[train] rays_per_step = 0: expected at least 1");
-    }
-    if !(0.0..=1.0).contains(&exp.train.field_restart_until) {
-        bail!(
-            "[train] field_restart_until = {} must lie in [0, 1] (a fraction of the steps)",
-            exp.train.field_restart_until
-        );
-    }
     let initial = noise.apply(&views.train_truth, views.diameter);
     let widened = views.bounds.widened_for(&views.train_truth, &initial);
     if widened.radius > views.bounds.radius * (1.0 + 1e-9) {
@@ -341,15 +402,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         clip.radius = widened.radius;
     }
     let seed = input.run.seed;
-    let iterations = input.run.iterations(exp.train.iterations);
     let steps = |fraction: f64| (fraction * iterations as f64).round() as u64;
     let train = &exp.train;
-    let (hold, warmup, rotation_warmup) = PoseTiming {
-        hold: train.pose_hold,
-        warmup: train.pose_warmup,
-        rotation_warmup: train.rotation_warmup.unwrap_or(train.pose_warmup),
-    }
-    .steps(iterations)?;
     input.run_dir.log(format_args!(
         "{}: {} training views of {}×{}, {} held out; field {}; noise {:?}; {} steps of {} rays × {} samples; methods {:?}",
         views.condition,
@@ -367,11 +421,10 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         views.settings.samples,
         train.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
     ));
-    if train.methods.contains(&Method::Posenet) {
+    if let Some(posenet) = &posenet {
         // PoseNet's translation head is bounded, |t_k| < s (`posenet.translation_scale`); the
         // correction that undoes the noise is `truth ∘ init⁻¹`.
-        let scale =
-            PoseNetConfig::from_section(&input.config.section("posenet"), seed)?.translation_scale;
+        let scale = posenet.translation_scale;
         let needed = views
             .train_truth
             .iter()
@@ -428,7 +481,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             let mut poses = FramePoses::new(
                 init,
                 views.train_times.clone(),
-                correction(method, input, &views, train, seed)?,
+                correction(method, posenet.as_ref(), &views, train, seed)?,
                 schedules,
             );
             let schedule = Schedule {
@@ -744,6 +797,13 @@ mod tests {
 
     use super::*;
     use train::tests::Tiny;
+
+    /// `cpose config show nerf` states the defaults: its values are those of an empty config.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"nerf\"\n";
+        cpose_core::testing::check_default_config("nerf", required, Settings::new);
+    }
 
     /// A field whose parameters all turn NaN at the start of step `poison_at` (the trainer sets
     /// the progress once per step).

@@ -38,7 +38,7 @@ use anyhow::Context;
 use cpose_core::plot::SeriesStyle;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, UnitKey};
-use cpose_core::{PoseNetConfig, Section};
+use cpose_core::{Config, PoseNetConfig, RunConfig, Section};
 use serde::{Deserialize, Serialize};
 
 use crate::field2d::{GridConfig, ImageField, PeMlpConfig};
@@ -52,9 +52,14 @@ inventory::submit! {
     Task {
         name: "planar",
         about: "2-D image alignment (paper §4.1.1): PoseNet vs BARF vs B-spline on patches of one image",
+        default_config: || [include_str!("../../defaults/planar.toml"), PoseNetConfig::DEFAULT_TABLE].join("\n"),
+        check: |config, run| Settings::new(config, run).map(drop),
         run,
     }
 }
+
+/// The most patches per motion (the paper has 7; each is a view of the crop).
+const MAX_PATCHES: usize = 1000;
 
 /// The config file of the task.
 #[derive(Debug, Default, Deserialize)]
@@ -67,11 +72,11 @@ struct Experiment {
     #[serde(default)]
     train: TrainConfig,
     /// The neural image, `kind = "grid"` or `"mlp"`, decoded by kind ([`FieldChoice`]).
-    #[serde(rename = "field")]
-    _field: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "field", default)]
+    _field: serde::de::IgnoredAny,
     /// PoseNet's settings, decoded as a [`PoseNetConfig`].
-    #[serde(rename = "posenet")]
-    _posenet: Option<serde::de::IgnoredAny>,
+    #[serde(rename = "posenet", default)]
+    _posenet: serde::de::IgnoredAny,
 }
 
 /// `[image]`: the photograph.
@@ -265,6 +270,13 @@ struct Setup {
     name: String,
     original_size: [usize; 2],
     layout: Layout,
+    settings: Settings,
+}
+
+/// The config, decoded and checked without reading the image.
+#[derive(Debug)]
+struct Settings {
+    exp: Experiment,
     spec: MotionSpec,
     field: FieldChoice,
     posenet: PoseNetConfig,
@@ -277,52 +289,24 @@ struct Setup {
     render_trajectories: usize,
 }
 
-impl Setup {
-    fn new(input: &TaskInput, exp: &Experiment) -> anyhow::Result<Self> {
-        let config = input.config;
+impl Settings {
+    fn new(config: &Config, run: &RunConfig) -> anyhow::Result<Self> {
+        let exp: Experiment = config.parse_params()?;
         let bad = |what: String| anyhow::anyhow!("{}: {what}", config.path().display());
-        let (original, name) = match &exp.image.path {
-            Some(path) => (
-                Image::load(path)?,
-                path.file_stem()
-                    .map_or("image".into(), |s| s.to_string_lossy().into_owned()),
-            ),
-            None => {
-                let [w, h] = exp.image.procedural_size;
-                if !(8..=8192).contains(&w) || !(8..=8192).contains(&h) {
-                    return Err(bad(format!(
-                        "[image] procedural_size {w}×{h}: each side must lie in 8..=8192"
-                    )));
-                }
-                (
-                    procedural_texture(w, h, input.run.seed),
-                    "procedural".into(),
-                )
-            }
-        };
+        let [w, h] = exp.image.procedural_size;
+        if exp.image.path.is_none() && !((8..=8192).contains(&w) && (8..=8192).contains(&h)) {
+            return Err(bad(format!(
+                "[image] procedural_size {w}×{h}: each side must lie in 8..=8192"
+            )));
+        }
         let scale = exp.image.scale;
         if !(scale > 0.0 && scale <= 1.0) {
             return Err(bad(format!("[image] scale must be in (0, 1], got {scale}")));
         }
-        let (w0, h0) = (original.width(), original.height());
-        let crop = exp.image.crop_px;
-        let side = (crop * scale).round() as usize;
-        if crop.is_nan() || crop <= 0.0 || crop > w0.min(h0) as f64 || side < 4 {
-            return Err(bad(format!(
-                "[image] crop_px = {crop} does not fit the {w0}×{h0} image at scale {scale} \
-                 (the crop must lie inside the image and span at least 4 working pixels)"
-            )));
-        }
-        let image = if scale < 1.0 {
-            original.resized(scale)
-        } else {
-            original
-        };
-        let layout = Layout::centre_crop(exp.motion.warp, [w0, h0], crop, side);
         let m = &exp.motion;
-        if m.patches < 2 {
+        if !(2..=MAX_PATCHES).contains(&m.patches) {
             return Err(bad(format!(
-                "[motion] patches must be at least 2, got {}",
+                "[motion] patches must lie in 2..={MAX_PATCHES}, got {}",
                 m.patches
             )));
         }
@@ -410,7 +394,7 @@ impl Setup {
         }
         let field = FieldChoice::from_section(&config.section("field"))?;
         field.init(0).map_err(|e| bad(format!("[field] {e}")))?;
-        let iterations = input.run.iterations(t.iterations);
+        let iterations = run.iterations(t.iterations);
         if !(0.0..1.0).contains(&t.pose_hold) {
             return Err(bad(format!(
                 "[train] pose_hold = {} must lie in [0, 1): a fraction of the {iterations} steps \
@@ -422,10 +406,6 @@ impl Setup {
         methods.sort();
         methods.dedup();
         Ok(Self {
-            image,
-            name,
-            original_size: [w0, h0],
-            layout,
             spec,
             field,
             posenet,
@@ -449,19 +429,8 @@ impl Setup {
             methods,
             trajectories: m.trajectories,
             render_trajectories: m.render_trajectories,
+            exp,
         })
-    }
-
-    fn motion(&self, seed: u64, k: usize) -> anyhow::Result<Motion> {
-        let [w, h] = [self.image.width() as f64, self.image.height() as f64];
-        let long = w.max(h);
-        self.spec
-            .sample(
-                seed * 1000 + k as u64,
-                &self.layout.corners,
-                [w / long, h / long],
-            )
-            .map_err(|e| anyhow::anyhow!("motion {k}: {e}"))
     }
 
     fn model(&self, method: Method, seed: u64) -> anyhow::Result<Box<dyn PoseModel>> {
@@ -495,6 +464,62 @@ impl Setup {
     }
 }
 
+impl Setup {
+    /// The checked settings with the image they name, read (or drawn) and cut into patches.
+    fn new(config: &Config, run: &RunConfig) -> anyhow::Result<Self> {
+        let settings = Settings::new(config, run)?;
+        let exp = &settings.exp;
+        let bad = |what: String| anyhow::anyhow!("{}: {what}", config.path().display());
+        let (original, name) = match &exp.image.path {
+            Some(path) => (
+                Image::load(path)?,
+                path.file_stem()
+                    .map_or("image".into(), |s| s.to_string_lossy().into_owned()),
+            ),
+            None => {
+                let [w, h] = exp.image.procedural_size;
+                (procedural_texture(w, h, run.seed), "procedural".into())
+            }
+        };
+        let scale = exp.image.scale;
+        let (w0, h0) = (original.width(), original.height());
+        let crop = exp.image.crop_px;
+        let side = (crop * scale).round() as usize;
+        if crop.is_nan() || crop <= 0.0 || crop > w0.min(h0) as f64 || side < 4 {
+            return Err(bad(format!(
+                "[image] crop_px = {crop} does not fit the {w0}×{h0} image at scale {scale} \
+                 (the crop must lie inside the image and span at least 4 working pixels)"
+            )));
+        }
+        let image = if scale < 1.0 {
+            original.resized(scale)
+        } else {
+            original
+        };
+        let layout = Layout::centre_crop(exp.motion.warp, [w0, h0], crop, side);
+        Ok(Self {
+            image,
+            name,
+            original_size: [w0, h0],
+            layout,
+            settings,
+        })
+    }
+
+    fn motion(&self, seed: u64, k: usize) -> anyhow::Result<Motion> {
+        let [w, h] = [self.image.width() as f64, self.image.height() as f64];
+        let long = w.max(h);
+        self.settings
+            .spec
+            .sample(
+                seed * 1000 + k as u64,
+                &self.layout.corners,
+                [w / long, h / long],
+            )
+            .map_err(|e| anyhow::anyhow!("motion {k}: {e}"))
+    }
+}
+
 /// The metrics of one method over its motions (the seeds of the study): mean and median corner
 /// error, mean PSNR, the fraction of motions aligned to within 1 px, and the summed wall time.
 fn summarise(runs: &[&Metrics]) -> Metrics {
@@ -519,10 +544,9 @@ fn summarise(runs: &[&Metrics]) -> Metrics {
 }
 
 fn run(input: &TaskInput) -> anyhow::Result<()> {
-    let exp: Experiment = input.config.parse_params()?;
-    let study = Setup::new(input, &exp)?;
+    let study = Setup::new(input.config, input.run)?;
     let seed = input.run.seed;
-    let motions = (0..study.trajectories)
+    let motions = (0..study.settings.trajectories)
         .map(|k| study.motion(seed, k))
         .collect::<anyhow::Result<Vec<_>>>()?;
     input.run_dir.log(format_args!(
@@ -533,17 +557,26 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         study.original_size[1],
         study.image.width(),
         study.image.height(),
-        study.spec.patches,
+        study.settings.spec.patches,
         (study.layout.grid.len() as f64).sqrt(),
         (study.layout.grid.len() as f64).sqrt(),
-        study.spec.warp,
-        study.field.name(),
-        study.trajectories,
-        study.methods.iter().map(|m| m.key()).collect::<Vec<_>>(),
-        study.schedule.iterations,
-        study.schedule.pixels_per_step,
+        study.settings.spec.warp,
+        study.settings.field.name(),
+        study.settings.trajectories,
+        study
+            .settings
+            .methods
+            .iter()
+            .map(|m| m.key())
+            .collect::<Vec<_>>(),
+        study.settings.schedule.iterations,
+        study.settings.schedule.pixels_per_step,
     ));
-    for k in 0..study.render_trajectories.min(study.trajectories) {
+    for k in 0..study
+        .settings
+        .render_trajectories
+        .min(study.settings.trajectories)
+    {
         let patches = train::sample_patches(&study.image, &study.layout, &motions[k].params);
         render::patch_strip(&patches, &study.layout).save_png(
             input
@@ -553,8 +586,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     }
     // One unit per method and motion; the motion's index is the unit's seed.
     let mut units = Vec::new();
-    for k in 0..study.trajectories {
-        for m in &study.methods {
+    for k in 0..study.settings.trajectories {
+        for m in &study.settings.methods {
             units.push(UnitKey::new(study.name.as_str(), m.key(), k as u64));
         }
     }
@@ -571,6 +604,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         .run(|unit| {
             let k = unit.key().seed as usize;
             let method = *study
+                .settings
                 .methods
                 .iter()
                 .find(|m| m.key() == unit.key().method)
@@ -579,24 +613,24 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
             let patches = train::sample_patches(&study.image, &study.layout, &motion.params);
             // The same neural-image initialisation and pixel draws for every method.
             let job_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
-            let mut field = study.field.init(job_seed)?;
-            let mut model = study.model(method, job_seed)?;
-            unit.set_steps(study.schedule.iterations);
+            let mut field = study.settings.field.init(job_seed)?;
+            let mut model = study.settings.model(method, job_seed)?;
+            unit.set_steps(study.settings.schedule.iterations);
             let (outcome, wall_s) = train::timed(|| {
                 Trainer::new(
                     field.as_mut(),
                     model.as_mut(),
                     &study.layout,
                     &patches,
-                    study.schedule,
+                    study.settings.schedule,
                     job_seed,
                 )
                 .run(&mut |done, loss, params| {
                     if unit.report_due(done) {
-                        let dim = study.spec.warp.dim();
+                        let dim = study.settings.spec.warp.dim();
                         let warps: Vec<Vec<f64>> =
                             params.chunks(dim).map(<[f64]>::to_vec).collect();
-                        let warps = train::relative_to_first(study.spec.warp, &warps);
+                        let warps = train::relative_to_first(study.settings.spec.warp, &warps);
                         let corner = train::corner_error_px(&study.layout, &warps, &motion.params);
                         unit.report(done, &[("loss", loss), ("corner_err_px", corner)]);
                     }
@@ -604,18 +638,18 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 })
             });
             let (final_loss, warps) = outcome?;
-            let first = Warp::new(study.spec.warp, &warps[0]);
+            let first = Warp::new(study.settings.spec.warp, &warps[0]);
             let rendered = train::render(
                 field.as_mut(),
                 study.image.width(),
                 study.image.height(),
                 &first,
             );
-            let warps = train::relative_to_first(study.spec.warp, &warps);
+            let warps = train::relative_to_first(study.settings.spec.warp, &warps);
             let corner_err_px = train::corner_error_px(&study.layout, &warps, &motion.params);
             let psnr_db =
                 train::region_psnr(&rendered, &study.image, &study.layout, &motion.params);
-            if k < study.render_trajectories {
+            if k < study.settings.render_trajectories {
                 let title = format!(
                     "planar {}, motion {k}: {}; corner error {corner_err_px:.2} px, \
                      PSNR {psnr_db:.1} dB",
@@ -755,5 +789,17 @@ pub mod render {
                 patches[i][y * side + u]
             }
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `cpose config show planar` states the defaults: its values are those of an empty config.
+    #[test]
+    fn the_default_config_holds_the_defaults() {
+        let required = "task = \"planar\"\n";
+        cpose_core::testing::check_default_config("planar", required, Settings::new);
     }
 }

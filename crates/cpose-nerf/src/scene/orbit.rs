@@ -47,7 +47,7 @@ pub fn look_at(eye: &Vector3<f64>, target: &Vector3<f64>, up: &Vector3<f64>) -> 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MonocularOrbit {
-    /// Frames in the sequence, at `t = 0, 1, …, frames − 1` (≥ 2).
+    /// Frames in the sequence, at `t = 0, 1, …, frames − 1` (2 to [`Self::MAX_FRAMES`]).
     pub frames: usize,
     /// Horizontal distance of the camera centre from the world z axis (> 0, scene units).
     pub radius: f64,
@@ -75,6 +75,9 @@ impl Default for MonocularOrbit {
 }
 
 impl MonocularOrbit {
+    /// The most frames an orbit has (a thousand times the paper's).
+    pub const MAX_FRAMES: usize = 100_000;
+
     /// Checks the ranges given in the field docs; the error names the `orbit.*` key.
     pub fn validate(&self) -> Result<(), SceneError> {
         let invalid = |key: &'static str, expected: &'static str, found: String| {
@@ -84,8 +87,8 @@ impl MonocularOrbit {
                 found,
             })
         };
-        if self.frames < 2 {
-            return invalid("orbit.frames", "at least 2", self.frames.to_string());
+        if !(2..=Self::MAX_FRAMES).contains(&self.frames) {
+            return invalid("orbit.frames", "2 to 100000", self.frames.to_string());
         }
         if !(self.radius > 0.0 && self.radius.is_finite()) {
             return invalid(
