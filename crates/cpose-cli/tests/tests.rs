@@ -13,6 +13,8 @@ mod bad_input;
 mod binary;
 // `cpose eval ate`, bad trajectory files, and a smoke run of every committed config.
 mod commands;
+// Every text and binary reader fed two thousand seeded random mutations of a valid file.
+mod fuzz;
 // Runs `cpose_cli::main_with_args` in this process, with a task and a pose field registered
 // by the test itself: full runs, run folders, errors raised inside tasks.
 mod in_process;
