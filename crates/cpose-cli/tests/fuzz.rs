@@ -85,7 +85,7 @@ fn fuzz(name: &str, seed_input: &[u8], read: impl Fn(&[u8])) {
         let input = mutate(&mut rng, seed_input);
         if catch_unwind(AssertUnwindSafe(|| read(&input))).is_err() {
             let kept = std::env::temp_dir().join(format!("cpose-fuzz-{name}-{case}"));
-            std::fs::write(&kept, &input).unwrap();
+            std::fs::write(&kept, &input).expect("the failing input is kept");
             panic!(
                 "{name} panicked on case {case}; its input is {}",
                 kept.display()
@@ -108,7 +108,7 @@ fn trajectory() -> Trajectory {
             )
         })
         .collect();
-    Trajectory::new(times, poses).unwrap()
+    Trajectory::new(times, poses).expect("increasing times")
 }
 
 #[test]
