@@ -214,8 +214,6 @@ fn euroc_room(
     if room.trajectory.is_some() {
         bail!("[synthetic] trajectory cannot be combined with [euroc]: the flight is the motion");
     }
-    room.validate()
-        .map_err(|m| anyhow::anyhow!("[synthetic]: {m}"))?;
     let seq = EurocSequence::load(&config.path)?;
     let gt = &seq.ground_truth;
     if gt.len() < 2 || seq.imu.len() < 2 {
@@ -432,9 +430,7 @@ impl Settings {
         }
         exp.imu.validate()?;
         if exp.euroc.is_some() || exp.data.source == Source::Synthetic {
-            exp.synthetic
-                .validate()
-                .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))?;
+            exp.synthetic.check(config)?;
         }
         if exp.euroc.is_none() {
             check_imu_rate(exp.imu_sim.rate_hz)?;

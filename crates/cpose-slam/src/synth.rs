@@ -106,6 +106,13 @@ impl RoomConfig {
     /// The `[synthetic]` table at the defaults, commented, for tasks' default configs.
     pub const DEFAULT_TABLE: &str = include_str!("../defaults/room.toml");
 
+    /// [`RoomConfig::validate`] as a task's check: the error names the config file and
+    /// `[synthetic]`.
+    pub fn check(&self, config: &cpose_core::Config) -> anyhow::Result<()> {
+        self.validate()
+            .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))
+    }
+
     /// Checks the values; the message names the key.
     pub fn validate(&self) -> Result<(), String> {
         if !(16..=4096).contains(&self.width) {

@@ -44,9 +44,7 @@ impl Experiment {
     /// The config, decoded and checked.
     fn new(config: &Config) -> anyhow::Result<Self> {
         let exp: Self = config.parse_params()?;
-        exp.synthetic
-            .validate()
-            .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))?;
+        exp.synthetic.check(config)?;
         Ok(exp)
     }
 }

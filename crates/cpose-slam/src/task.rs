@@ -416,9 +416,7 @@ impl Settings {
             );
         }
         if exp.data.source == Source::Synthetic {
-            exp.synthetic
-                .validate()
-                .map_err(|m| anyhow::anyhow!("{}: [synthetic]: {m}", config.path().display()))?;
+            exp.synthetic.check(config)?;
         }
         let setup = SlamSetup::new(
             run,
