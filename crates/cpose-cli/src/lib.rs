@@ -194,8 +194,14 @@ struct TrajectoryInputs {
 }
 
 impl TrajectoryInputs {
-    /// Both trajectories, read; errors name the file.
+    /// Both trajectories, read; errors name the file. A bad `--max-diff` is refused first.
     fn read(&self) -> Result<(Trajectory, Trajectory), Failure> {
+        if !(self.max_diff.is_finite() && self.max_diff >= 0.0) {
+            return Err(Failure::Usage(anyhow::anyhow!(
+                "--max-diff {}: expected a finite, non-negative time in seconds",
+                self.max_diff
+            )));
+        }
         let read = |path: &Path, times: &Option<PathBuf>| {
             read_trajectory(path, self.format, times.as_deref())
         };
@@ -464,6 +470,10 @@ fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
         echo_log: !args.quiet,
     };
     let run_dir = RunDir::create(task.name, &options).map_err(|e| usage(e.into()))?;
+    // The config first: a run killed at any later moment leaves a folder `--resume` accepts.
+    run_dir
+        .write_config(&config)
+        .map_err(|e| Failure::Run(e.into()))?;
     let build = build_info();
     let session = Session::begin(&build, command_line, run_config.threads);
     let recorder = Recorder::start(&run_dir, session, args.resume.is_some())
@@ -522,7 +532,7 @@ fn run(args: &RunArgs, command_line: Vec<String>) -> Result<(), Failure> {
     }
 }
 
-/// Saves the config and runs the task in `run_dir`; errors carry the task's name and folder.
+/// Runs the task in `run_dir`; errors carry the task's name and folder.
 fn run_task(
     args: &RunArgs,
     task: &registry::Task,
@@ -531,7 +541,6 @@ fn run_task(
     run_config: &cpose_core::RunConfig,
     run_dir: &RunDir,
 ) -> anyhow::Result<()> {
-    run_dir.write_config(config)?;
     run_dir.log(format_args!(
         "task {} with config {}{}",
         task.name,
@@ -612,7 +621,13 @@ fn print_report(
 /// `cpose eval rpe`: [`eval::rpe_report`] of two trajectory files.
 fn eval_rpe(args: &RpeArgs) -> Result<(), Failure> {
     let delta = match args.delta_unit.as_str() {
-        "m" => RpeDelta::Metres(args.delta),
+        "m" if args.delta.is_finite() && args.delta > 0.0 => RpeDelta::Metres(args.delta),
+        "m" => {
+            return Err(Failure::Usage(anyhow::anyhow!(
+                "--delta {} with --delta-unit m: expected a finite distance above 0 metres",
+                args.delta
+            )));
+        }
         _ if args.delta >= 1.0 && args.delta.fract() == 0.0 => {
             RpeDelta::Frames(args.delta as usize)
         }

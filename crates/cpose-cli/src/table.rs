@@ -36,7 +36,15 @@ pub fn metrics_table(dirs: &[PathBuf], columns: &[String]) -> anyhow::Result<Str
         let run = dir
             .file_name()
             .map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into());
+        let before = rows.len();
         collect_rows(&value, &run, "", &mut rows);
+        if rows.len() == before {
+            bail!(
+                "{} holds no metrics: expected a JSON object with numbers at some level, \
+                 such as {{\"rot_err_deg\": 0.3}}",
+                path.display()
+            );
+        }
     }
     let all: BTreeSet<&String> = rows.iter().flat_map(|(_, cells)| cells.keys()).collect();
     if let Some(c) = columns.iter().find(|c| !all.contains(c)) {

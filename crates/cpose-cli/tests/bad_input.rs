@@ -1171,6 +1171,28 @@ fn trajectory_files() {
             expect: &["creating the plot folder gt.txt: File exists"],
         },
         Case {
+            name: "eval: --max-diff NaN",
+            files: &[GT, ("est.txt", GT.1)],
+            args: &["eval", "ate", "gt.txt", "est.txt", "--max-diff", "nan"],
+            code: 2,
+            expect: &["--max-diff NaN: expected a finite, non-negative time in seconds"],
+        },
+        Case {
+            name: "rpe: a negative distance",
+            files: &[GT, ("est.txt", GT.1)],
+            args: &[
+                "eval",
+                "rpe",
+                "gt.txt",
+                "est.txt",
+                "--delta-unit",
+                "m",
+                "--delta=-1",
+            ],
+            code: 2,
+            expect: &["--delta -1 with --delta-unit m: expected a finite distance above 0 metres"],
+        },
+        Case {
             name: "rpe: half a frame",
             files: &[GT, ("est.txt", GT.1)],
             args: &["eval", "rpe", "gt.txt", "est.txt", "--delta", "0.5"],
@@ -1456,6 +1478,13 @@ fn run_table_and_command_line() {
             expect: &[
                 "cannot read tb/metrics.json (a run folder holds one when its run finished): Not a directory",
             ],
+        },
+        Case {
+            name: "table: metrics.json holds an array",
+            files: &[("tb/metrics.json", T("[1, 2]"))],
+            args: &["table", "tb"],
+            code: 2,
+            expect: &["tb/metrics.json holds no metrics: expected a JSON object with numbers"],
         },
         Case {
             name: "table: an unknown metric",
@@ -2034,7 +2063,7 @@ fn task_configs() {
             name: "events: width = 1000000",
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.width=1000000"],
-            code: 1,
+            code: 2,
             expect: &["[simulation]: camera.width: expected 1 to 65535 pixels, got 1000000"],
         },
         Case {
@@ -2042,7 +2071,18 @@ fn task_configs() {
             files: &[],
             args: &["run", EVENTS, "--set", "simulation.duration_secs=-1"],
             code: 2,
-            expect: &["[simulation]: turntable.duration_secs: expected a finite value > 0, got -1"],
+            expect: &[
+                "[simulation]: turntable.duration_secs: expected a value in (0, 1e6] seconds, got -1",
+            ],
+        },
+        Case {
+            name: "events: duration_secs = 1e12",
+            files: &[],
+            args: &["run", EVENTS, "--set", "simulation.duration_secs=1e12"],
+            code: 2,
+            expect: &[
+                "[simulation]: turntable.duration_secs: expected a value in (0, 1e6] seconds, got 1000000000000",
+            ],
         },
         Case {
             name: "events: radius = nan",
@@ -3327,6 +3367,27 @@ fn rgbd_folders() {
             ],
         },
         Case {
+            name: "replica: crop_edge larger than the image",
+            files: &[SLAM_X, ("scene", S(replica))],
+            args: &["run", "x.toml", "--set", "data.crop_edge=6"],
+            code: 1,
+            expect: &["scene: crop_edge 6 leaves no pixels of a 16×12 image"],
+        },
+        Case {
+            name: "7scenes: crop_edge larger than the image",
+            files: &[SLAM_X, ("scene", S(seven_scenes))],
+            args: &[
+                "run",
+                "x.toml",
+                "--set",
+                "data.source=\"7scenes\"",
+                "--set",
+                "data.crop_edge=6",
+            ],
+            code: 1,
+            expect: &["scene: crop_edge 6 leaves no pixels of a 16×12 image"],
+        },
+        Case {
             name: "replica: the path is a file",
             files: &[SLAM_X, ("scene", T("not a folder\n"))],
             args: RUN_X,
@@ -4313,6 +4374,9 @@ fn npz_float_pixel() -> Vec<u8> {
     );
     replaced(events_entries(), 0, x)
 }
+fn npz_all_outside() -> Vec<u8> {
+    zip(&event_entries(&T4, &P4, &[1000, 2000, 3000, 4000]))
+}
 /// `x.npy` whose header promises 4 values over 3.
 fn npz_truncated_npy() -> Vec<u8> {
     let x = stored("x.npy", npy_raw("<u2", "False", "(4,)", &u16s(&[1, 2, 3])));
@@ -4495,6 +4559,15 @@ fn eventnerf_folders() {
             code: 1,
             expect: &[
                 "scene/train/events/events.npz: array 'x' at index 0: expected an integer pixel coordinate, got 1.5",
+            ],
+        },
+        Case {
+            name: "npz: every event outside the sensor",
+            files: &[EVENTS_X, ("scene", S(eventnerf)), (NPZ, B(npz_all_outside))],
+            args: RUN_X,
+            code: 1,
+            expect: &[
+                "scene/train/events/events.npz: expected events on the 346×260 sensor, got none (4 events read, 4 dropped outside the sensor (first: event 0: (1000, 5))",
             ],
         },
         Case {

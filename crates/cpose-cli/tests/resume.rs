@@ -225,6 +225,89 @@ fn trajectory_resumes_after_kill_9_with_the_uninterrupted_results() {
     assert!(err.contains("config.toml was changed"), "{err}");
 }
 
+/// Kills at seeded random moments — while the run starts, inside a step, while a checkpoint or
+/// an output is written, after the last output — and every resume killed again the same way,
+/// until one completes: the results equal the uninterrupted run's each time.
+#[test]
+fn trajectory_resumes_after_kills_at_random_moments() {
+    let config = "configs/trajectory_fit.toml";
+    let settings = [
+        "fit.iterations=150",
+        "fields.posenet.width=32",
+        "run.threads=1",
+        "run.checkpoint_secs=0",
+    ];
+    let whole = temp_dir("random-whole");
+    let started = Instant::now();
+    let out = cpose(&run_args(config, &settings, &whole));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let wall = started.elapsed().as_secs_f64();
+    // xorshift64: the same moments on every run of the test.
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut uniform = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let finished = |dir: &Path| {
+        std::fs::read_to_string(dir.join("study.json"))
+            .is_ok_and(|m| m.contains("\"finished\": true"))
+    };
+    for trial in 0..3 {
+        let cut = temp_dir("random-cut");
+        let mut args = run_args(config, &settings, &cut);
+        let mut kills = 0;
+        loop {
+            let mut child = Command::new(env!("CARGO_BIN_EXE_cpose"))
+                .current_dir(workspace_root())
+                .args(&args)
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .expect("the cpose binary starts");
+            std::thread::sleep(Duration::from_secs_f64(uniform() * wall));
+            if let Some(status) = child.try_wait().expect("the run can be polled") {
+                assert!(status.success(), "trial {trial}: {status}");
+                break;
+            }
+            child.kill().expect("the run can be killed"); // SIGKILL
+            child.wait().expect("the killed run is reaped");
+            kills += 1;
+            if finished(&cut) {
+                break; // killed after its last write
+            }
+            // A run killed before its folder holds its config starts again; later, it resumes.
+            if cut.join("config.toml").is_file() {
+                args = vec![
+                    "run".into(),
+                    "--resume".into(),
+                    cut.display().to_string(),
+                    "-q".into(),
+                ];
+            }
+            if kills == 5 {
+                let out = cpose(&args);
+                assert!(
+                    out.status.success(),
+                    "{}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+                break;
+            }
+        }
+        assert_eq!(
+            metrics(&cut),
+            metrics(&whole),
+            "trial {trial}, {kills} kills"
+        );
+        same_trajectories(&whole, &cut);
+    }
+}
+
 /// Planar units are short and keep no checkpoint: the killed unit runs again from its start.
 #[test]
 fn planar_resumes_after_kill_9_with_the_uninterrupted_results() {

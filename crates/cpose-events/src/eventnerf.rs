@@ -337,8 +337,8 @@ fn read_views(split_dir: &Path) -> Result<Views, EventsError> {
 /// Errors name the file: missing folders, not exactly one `.npz`, a pose that is not a rigid
 /// 4×4 matrix, intrinsics that are not a pinhole `K` or differ between views, a `times.txt`
 /// that does not give one non-decreasing time per view, held-out images missing or of another
-/// size, and every event-file error of [`read_events_npz`]. Without `times.txt`, at least two
-/// views and one event are needed to place the views in time.
+/// size, no event on the sensor, and every event-file error of [`read_events_npz`]. Without
+/// `times.txt`, at least two views are needed to place the views in time.
 pub fn read_eventnerf(
     scene_dir: &Path,
     options: &EventNerfOptions,
@@ -438,6 +438,14 @@ pub fn read_eventnerf(
     };
     let read_options = ReadOptions::new(width, height).with_time_unit(options.time_unit);
     let (events, report) = read_events_npz(npz, &read_options)?;
+    if events.is_empty() {
+        return Err(EventsError::format(
+            npz,
+            None,
+            format!("events on the {width}×{height} sensor"),
+            format!("none ({report})"),
+        ));
+    }
 
     let k = views.names.len();
     let view_times = match views.times {

@@ -324,6 +324,24 @@ pub fn uniform_times(start_secs: f64, end_secs: f64, n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The sensor's width and height as event coordinates: 1 to 65535 pixels each.
+fn sensor_size(camera: &PinholeCamera) -> Result<(u16, u16), EventsError> {
+    let size = |v: usize, key| {
+        u16::try_from(v)
+            .ok()
+            .filter(|&v| v > 0)
+            .ok_or(EventsError::Invalid {
+                key,
+                expected: "1 to 65535 pixels",
+                found: v.to_string(),
+            })
+    };
+    Ok((
+        size(camera.width, "camera.width")?,
+        size(camera.height, "camera.height")?,
+    ))
+}
+
 /// Renders `scene` with `camera` at the poses of `field` (`world_from_body` taken as
 /// `world_from_camera`, OpenCV axes) at `render_times_secs` (increasing, inside the field's
 /// range, at least two) with `supersample²` rays per pixel, and simulates the events between
@@ -336,20 +354,7 @@ pub fn simulate_scene_events<S: Real>(
     supersample: usize,
     config: &SimulatorConfig,
 ) -> Result<SimulatedEvents, EventsError> {
-    let size = |v: usize, key| {
-        u16::try_from(v)
-            .ok()
-            .filter(|&v| v > 0)
-            .ok_or(EventsError::Invalid {
-                key,
-                expected: "1 to 65535 pixels",
-                found: v.to_string(),
-            })
-    };
-    let (width, height) = (
-        size(camera.width, "camera.width")?,
-        size(camera.height, "camera.height")?,
-    );
+    let (width, height) = sensor_size(camera)?;
     if render_times_secs.len() < 2 || supersample == 0 {
         return Err(EventsError::Invalid {
             key: "simulator render times",
@@ -407,6 +412,7 @@ impl SyntheticEventsConfig {
     pub fn validate(&self) -> Result<(), EventsError> {
         self.turntable.validate()?;
         self.simulator.validate()?;
+        sensor_size(&self.camera)?;
         let invalid = |key, expected, found: usize| EventsError::Invalid {
             key,
             expected,
@@ -417,6 +423,9 @@ impl SyntheticEventsConfig {
         }
         if self.render_steps == 0 {
             return Err(invalid("render_steps", "at least 1", self.render_steps));
+        }
+        if self.supersample == 0 {
+            return Err(invalid("supersample", "at least 1", 0));
         }
         if self.held_out_supersample == 0 {
             return Err(invalid("held_out_supersample", "at least 1", 0));

@@ -56,6 +56,10 @@ impl Default for Turntable {
 }
 
 impl Turntable {
+    /// The longest revolution, seconds (11.6 days): far beyond any event recording, and well
+    /// inside the nanosecond timestamps' range.
+    pub const MAX_DURATION_SECS: f64 = 1e6;
+
     /// Checks the ranges of the field docs; the error names the parameter.
     pub fn validate(&self) -> Result<(), EventsError> {
         let invalid = |key, expected, found: f64| {
@@ -71,10 +75,10 @@ impl Turntable {
         if !self.height.is_finite() {
             return invalid("turntable.height", "a finite value", self.height);
         }
-        if !(self.duration_secs > 0.0 && self.duration_secs.is_finite()) {
+        if !(self.duration_secs > 0.0 && self.duration_secs <= Self::MAX_DURATION_SECS) {
             return invalid(
                 "turntable.duration_secs",
-                "a finite value > 0",
+                "a value in (0, 1e6] seconds",
                 self.duration_secs,
             );
         }

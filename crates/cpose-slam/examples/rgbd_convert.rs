@@ -46,8 +46,8 @@ fn main() -> ExitCode {
     let seq = match args[0].as_str() {
         "7scenes" => read_seven_scenes(&src, 1.0, 30.0),
         "replica" => read_replica(&src, None, 1.0, 30.0),
-        "scannet" => read_scannet(&src, 1.0, 0),
-        "tum" => read_tum_rgbd(&src, None, 1.0, 0),
+        "scannet" => read_scannet(&src, 1.0),
+        "tum" => read_tum_rgbd(&src, None, 1.0),
         other => {
             eprintln!(
                 "rgbd_convert: unknown source layout {other:?} (7scenes, replica, scannet, tum)"

@@ -107,7 +107,7 @@ pub struct DataConfig {
     /// Resolution factor in (0, 1].
     #[serde(default = "one")]
     pub resolution: f64,
-    /// Pixels cut from every side (NICE-SLAM: ScanNet 10, TUM 8).
+    /// Pixels cut from every side, for every source (NICE-SLAM: ScanNet 10, TUM 8).
     #[serde(default)]
     pub crop_edge: usize,
     /// The frame rate of datasets whose files have no timestamps (Replica, 7-Scenes), Hz.
@@ -279,7 +279,8 @@ struct MethodResult {
 }
 
 /// The RGB-D sequence `[data]` names (the synthetic room is generated on first use), all its
-/// frames (`data.stride` is applied by the caller: [`RgbdSequence::every`]).
+/// frames, cropped by `data.crop_edge` (`data.stride` is applied by the caller:
+/// [`RgbdSequence::every`]).
 pub fn open_sequence(
     d: &DataConfig,
     synthetic: &RoomConfig,
@@ -303,8 +304,8 @@ pub fn open_sequence(
             }
             read_replica(&d.path, None, d.resolution, d.frame_rate)?
         }
-        Source::Scannet => read_scannet(&d.path, d.resolution, d.crop_edge)?,
-        Source::Tum => read_tum_rgbd(&d.path, None, d.resolution, d.crop_edge)?,
+        Source::Scannet => read_scannet(&d.path, d.resolution)?,
+        Source::Tum => read_tum_rgbd(&d.path, None, d.resolution)?,
         Source::SevenScenes => {
             if !d.path.is_dir() {
                 bail!(
@@ -318,7 +319,7 @@ pub fn open_sequence(
             read_seven_scenes(&d.path, d.resolution, d.frame_rate)?
         }
     };
-    Ok(seq)
+    Ok(seq.cropped(d.crop_edge)?)
 }
 
 /// Bumped whenever the room, the walk or the noise model changes, so stale data is rebuilt.

@@ -199,9 +199,9 @@ mod tests {
             let (read, precision) = match layout {
                 // Replica's 6553.5 units per metre round the millimetres; the others hold them.
                 Layout::Replica => (read_replica(&dst, None, 1.0, 30.0).unwrap(), 1e-4),
-                Layout::Scannet => (read_scannet(&dst, 1.0, 0).unwrap(), 2e-6),
+                Layout::Scannet => (read_scannet(&dst, 1.0).unwrap(), 2e-6),
                 Layout::Tum => (
-                    read_tum_rgbd(&dst, Some(SEVEN_SCENES_INTRINSICS), 1.0, 0).unwrap(),
+                    read_tum_rgbd(&dst, Some(SEVEN_SCENES_INTRINSICS), 1.0).unwrap(),
                     2e-6,
                 ),
             };

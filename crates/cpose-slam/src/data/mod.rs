@@ -11,7 +11,7 @@
 //! * A sequence loads at a resolution factor `s` (`0 < s ≤ 1`): colour is resized with a tent
 //!   filter, depth by taking the nearest stored pixel (averaging depth across an object's edge
 //!   would invent surfaces between the two), and the camera is scaled to the new size. Then
-//!   `crop_edge` pixels are cut from every side (ScanNet and TUM, as NICE-SLAM).
+//!   [`RgbdSequence::cropped`] cuts pixels from every side (NICE-SLAM crops ScanNet and TUM).
 
 mod convert;
 mod depth;
@@ -226,8 +226,8 @@ pub struct RgbdSequence {
 
 impl RgbdSequence {
     /// Assembles a sequence whose stored depth images are `stored` pixels, loaded at
-    /// `resolution` and cropped by `crop_edge`. Errors on an empty frame list, a factor outside
-    /// `(0, 1]` or a crop that leaves no pixels.
+    /// `resolution` (uncropped: see [`RgbdSequence::cropped`]). Errors on an empty frame list or
+    /// a factor outside `(0, 1]`.
     fn new(
         root: &Path,
         intrinsics: &Intrinsics,
@@ -236,7 +236,6 @@ impl RgbdSequence {
         truth: Vec<Option<Isometry3<f64>>>,
         depth_scale: f64,
         resolution: f64,
-        crop_edge: usize,
     ) -> Result<Self, RgbdError> {
         if frames.is_empty() {
             return Err(RgbdError::layout(root, "no frames found"));
@@ -259,20 +258,13 @@ impl RgbdSequence {
         // The camera of the image `resized` returns: the exact size ratio on each axis.
         let (sw, sh) = resized_size(stored, resolution);
         let (kx, ky) = (sw as f64 / stored.0 as f64, sh as f64 / stored.1 as f64);
-        let c = crop_edge as f64;
-        if 2 * crop_edge >= sw.min(sh) {
-            return Err(RgbdError::layout(
-                root,
-                format!("crop_edge {crop_edge} leaves no pixels of a {sw}×{sh} image"),
-            ));
-        }
         let camera = PinholeCamera {
-            width: sw - 2 * crop_edge,
-            height: sh - 2 * crop_edge,
+            width: sw,
+            height: sh,
             fx: full.fx * kx,
             fy: full.fy * ky,
-            cx: full.cx * kx - c,
-            cy: full.cy * ky - c,
+            cx: full.cx * kx,
+            cy: full.cy * ky,
         };
         Ok(Self {
             root: root.to_path_buf(),
@@ -283,8 +275,31 @@ impl RgbdSequence {
             invalid_depth: None,
             stored,
             resolution,
-            crop_edge,
+            crop_edge: 0,
         })
+    }
+
+    /// The sequence with `crop_edge` pixels cut from every side of the (resized) images, in place
+    /// of the current crop (NICE-SLAM crops ScanNet by 10, TUM by 8); the camera's size and
+    /// principal point follow. Errors on a crop that leaves no pixels.
+    pub fn cropped(mut self, crop_edge: usize) -> Result<Self, RgbdError> {
+        let (w, h) = (
+            self.camera.width + 2 * self.crop_edge,
+            self.camera.height + 2 * self.crop_edge,
+        );
+        if 2 * crop_edge >= w.min(h) {
+            return Err(RgbdError::layout(
+                &self.root,
+                format!("crop_edge {crop_edge} leaves no pixels of a {w}×{h} image"),
+            ));
+        }
+        let shift = self.crop_edge as f64 - crop_edge as f64;
+        self.camera.width = w - 2 * crop_edge;
+        self.camera.height = h - 2 * crop_edge;
+        self.camera.cx += shift;
+        self.camera.cy += shift;
+        self.crop_edge = crop_edge;
+        Ok(self)
     }
 
     /// Number of frames.

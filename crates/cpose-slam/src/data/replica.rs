@@ -130,7 +130,6 @@ pub fn read_replica(
         truth,
         depth_scale,
         resolution,
-        0,
     )
 }
 
@@ -317,6 +316,21 @@ mod tests {
                 frame.depth.height()
             ),
             (4, 4, 3)
+        );
+        // A crop cuts every side; a second crop replaces the first.
+        let cropped = seq.cropped(2).unwrap().cropped(1).unwrap();
+        assert_eq!(
+            (cropped.camera.width, cropped.camera.height),
+            (6, 4),
+            "8×6 less one pixel per side"
+        );
+        assert_eq!((cropped.camera.cx, cropped.camera.cy), (3.0, 2.0));
+        let frame = cropped.load(2).unwrap();
+        assert_eq!((frame.color.width(), frame.depth.height()), (6, 4));
+        let err = cropped.cropped(3).unwrap_err().to_string();
+        assert!(
+            err.contains("crop_edge 3 leaves no pixels of a 8×6 image"),
+            "{err}"
         );
     }
 

@@ -28,14 +28,10 @@ pub const SCANNET_DEPTH_SCALE: f64 = 1000.0;
 /// ScanNet's frame rate, Hz (frame `i` gets time `i / 30`).
 const SCANNET_FRAME_RATE: f64 = 30.0;
 
-/// Reads the ScanNet scene in `root` (or `root/frames`), cropping `crop_edge` pixels from every
-/// side after resizing (NICE-SLAM: 10). Frames whose pose is missing from `pose/` are an error;
+/// Reads the ScanNet scene in `root` (or `root/frames`) at `resolution` (NICE-SLAM crops it by
+/// 10: [`RgbdSequence::cropped`]). Frames whose pose is missing from `pose/` are an error;
 /// poses with `inf`/`nan` entries are kept as `None` (dropped from the ATE, as NICE-SLAM does).
-pub fn read_scannet(
-    root: &Path,
-    resolution: f64,
-    crop_edge: usize,
-) -> Result<RgbdSequence, RgbdError> {
+pub fn read_scannet(root: &Path, resolution: f64) -> Result<RgbdSequence, RgbdError> {
     let base = if root.join("frames").join("color").is_dir() {
         root.join("frames")
     } else {
@@ -88,7 +84,6 @@ pub fn read_scannet(
         truth,
         SCANNET_DEPTH_SCALE,
         resolution,
-        crop_edge,
     )
 }
 
@@ -156,7 +151,7 @@ mod tests {
             };
             std::fs::write(frames.join(format!("pose/{i}.txt")), pose).unwrap();
         }
-        let seq = read_scannet(&root, 1.0, 2).unwrap();
+        let seq = read_scannet(&root, 1.0).unwrap().cropped(2).unwrap();
         assert_eq!(seq.len(), 3);
         assert!(seq.frames[2].depth.ends_with("10.png"), "numeric order");
         assert_eq!(seq.truth[2].unwrap().translation.x, 10.0);
@@ -183,7 +178,7 @@ mod tests {
             .unwrap()
             .save_png(&root.join("depth/0.png"), 1000.0)
             .unwrap();
-        let err = read_scannet(&root, 1.0, 0).unwrap_err().to_string();
+        let err = read_scannet(&root, 1.0).unwrap_err().to_string();
         assert!(
             err.contains("frame 0 has a colour file") && err.contains("no pose file"),
             "{err}"
@@ -207,7 +202,7 @@ mod tests {
         )
         .unwrap();
         std::fs::copy(root.join("depth/0.png"), root.join("depth/2.png")).unwrap();
-        let err = read_scannet(&root, 1.0, 0).unwrap_err().to_string();
+        let err = read_scannet(&root, 1.0).unwrap_err().to_string();
         assert!(
             err.contains("frame 1 has a colour file") && err.contains("no depth file"),
             "{err}"

@@ -151,7 +151,6 @@ pub fn read_seven_scenes(
         truth,
         SEVEN_SCENES_DEPTH_SCALE,
         resolution,
-        0,
     )?;
     seq.invalid_depth = Some(SEVEN_SCENES_INVALID_DEPTH);
     Ok(seq)

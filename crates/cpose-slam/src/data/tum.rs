@@ -58,7 +58,6 @@ pub fn read_tum_rgbd(
     root: &Path,
     intrinsics: Option<Intrinsics>,
     resolution: f64,
-    crop_edge: usize,
 ) -> Result<RgbdSequence, RgbdError> {
     if !root.join("rgb.txt").is_file() {
         return Err(RgbdError::layout(
@@ -136,7 +135,6 @@ pub fn read_tum_rgbd(
         truth,
         TUM_DEPTH_SCALE,
         resolution,
-        crop_edge,
     )
 }
 
@@ -228,7 +226,7 @@ mod tests {
             gt.push_str(&format!("{t:.4} {} 2 3 0 0 0.2588190 0.9659258\n", 1.0 + t));
         }
         std::fs::write(root.join("groundtruth.txt"), gt).unwrap();
-        let seq = read_tum_rgbd(&root, None, 1.0, 0).unwrap();
+        let seq = read_tum_rgbd(&root, None, 1.0).unwrap();
         assert_eq!(seq.times(), vec![0.0, 0.1]);
         assert!(
             (seq.camera.fx - 520.9 * 8.0 / 640.0).abs() < 1e-12,
@@ -251,12 +249,12 @@ mod tests {
         )
         .unwrap();
         std::fs::write(root.join("depth.txt"), "").unwrap();
-        let err = read_tum_rgbd(&root, None, 1.0, 0).unwrap_err().to_string();
+        let err = read_tum_rgbd(&root, None, 1.0).unwrap_err().to_string();
         assert!(
             err.contains("rgb.txt:2") && err.contains("timestamp path"),
             "{err}"
         );
-        let err = read_tum_rgbd(&root.join("nope"), None, 1.0, 0)
+        let err = read_tum_rgbd(&root.join("nope"), None, 1.0)
             .unwrap_err()
             .to_string();
         assert!(err.contains("expected a TUM RGB-D sequence"), "{err}");
