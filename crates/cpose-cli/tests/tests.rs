@@ -1,7 +1,7 @@
 //! Integration tests of the `cpose` command line (one test binary, as ripgrep does).
 
 // An integration test is its own crate: name every application crate again so that their
-// registrations are linked here too (see research/rust-ecosystem.md §3).
+// registrations are linked here too (see docs/methods.md §5.4).
 use cpose_events as _;
 use cpose_imu as _;
 use cpose_nerf as _;

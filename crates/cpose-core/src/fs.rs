@@ -33,8 +33,8 @@ fn tmp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
-/// The folder of shared real data for tests and benchmarks (see DESIGN.md, "Tests that need real
-/// data"): the environment variable `CPOSE_DATA_DIR` if set, else `<workspace root>/../shared/data`,
+/// The folder of shared real data for tests and benchmarks (see docs/methods.md §5.3): the
+/// environment variable `CPOSE_DATA_DIR` if set, else `<workspace root>/../shared/data`,
 /// where the workspace root is two levels above this crate's manifest. `None` when that folder does
 /// not exist (a user's machine); callers then skip, saying so.
 pub fn shared_data_dir() -> Option<PathBuf> {

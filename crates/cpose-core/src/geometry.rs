@@ -327,7 +327,7 @@ pub fn quat_to_xyzw(q: &UnitQuaternion<f64>) -> [f64; 4] {
 
 /// The representative of `±q` with `w > 0`; when `w = 0`, the one whose first non-zero
 /// imaginary component is positive. `q` and `−q` are the same rotation (PoseNet's `w > 0`
-/// hemisphere, algorithms.md §6).
+/// hemisphere, docs/methods.md §4.4).
 pub fn canonicalize_quat(q: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
     let flip = if q.w != 0.0 {
         q.w < 0.0
@@ -435,7 +435,7 @@ fn flip_cam_yz(world_from_cam: &Isometry3<f64>) -> Isometry3<f64> {
 // Gravity and specific force
 // ---------------------------------------------------------------------------------------------
 
-/// Standard gravity magnitude used inside cpose, m/s² (algorithms.md §6).
+/// Standard gravity magnitude used inside cpose, m/s² (docs/methods.md §4.1).
 pub const GRAVITY_M_S2: f64 = 9.81;
 
 /// `g_world = (0, 0, −9.81)` m/s²: worlds are z-up (synthetic data, EuRoC); a dataset with
@@ -445,8 +445,8 @@ pub fn gravity_world() -> Vector3<f64> {
 }
 
 /// The specific force an accelerometer rigidly attached to the body measures, in the body frame:
-/// `f = Rᵀ (p̈ − g_world)` with `R` the rotation of `world_from_body` (algorithms.md §6). At rest
-/// and level it is `(0, 0, +9.81)`: the reaction to gravity, pointing up.
+/// `f = Rᵀ (p̈ − g_world)` with `R` the rotation of `world_from_body` (docs/methods.md §4.2).
+/// At rest and level it is `(0, 0, +9.81)`: the reaction to gravity, pointing up.
 pub fn specific_force_body(
     world_from_body_rotation: &UnitQuaternion<f64>,
     lin_acc_world: &Vector3<f64>,
@@ -460,7 +460,7 @@ pub fn specific_force_body(
 // ---------------------------------------------------------------------------------------------
 
 /// `Ω(ω)` with `q ⊗ (0, ω) = Ω(ω) q` (rows and columns ordered `w, x, y, z`), so that
-/// `q̇ = ½ Ω(ω_body) q` (algorithms.md §6; Solà eq. 199 with body rates):
+/// `q̇ = ½ Ω(ω_body) q` (docs/methods.md §4.3; Solà eq. 199 with body rates):
 /// `[[0, −ωx, −ωy, −ωz], [ωx, 0, ωz, −ωy], [ωy, −ωz, 0, ωx], [ωz, ωy, −ωx, 0]]`.
 pub fn omega_matrix<T: RealField + Copy>(ang_vel_body: &Vector3<T>) -> Matrix4<T> {
     let (x, y, z) = (ang_vel_body.x, ang_vel_body.y, ang_vel_body.z);

@@ -1,4 +1,4 @@
-//! EventNeRF's colour correction before image metrics (algorithms.md §4.8).
+//! EventNeRF's colour correction before image metrics (docs/methods.md §3.4).
 //!
 //! Events fix log intensity only up to an offset and a contrast per channel, so renders are
 //! mapped onto the ground truth before PSNR and SSIM: in `x = log(I^2.2 + 0.1)`, a least-squares

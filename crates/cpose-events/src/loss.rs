@@ -1,6 +1,6 @@
-//! EventNeRF's loss on one ray pair (algorithms.md §4.4).
+//! EventNeRF's loss on one ray pair (docs/methods.md §3.3).
 //!
-//! A pixel of Bayer channel `c` whose events in the window `(τ_s, τ_e]` sum to `E` is rendered
+//! A pixel of Bayer channel `c` whose events in the window `[τ_s, τ_e)` sum to `E` is rendered
 //! at both ends, `Ĉ_s` and `Ĉ_e`; its log-intensity change must equal `θ E`:
 //!
 //! `ℓ = (L(Ĉ_e[c]) − L(Ĉ_s[c]) − θ E)²`, `L(v) = log(v^γ + ε)`, `γ = 2.2`,

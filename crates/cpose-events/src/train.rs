@@ -1,4 +1,4 @@
-//! EventNeRF training with a pose at every window end (paper §4.2; algorithms.md §4.3–4.5).
+//! EventNeRF training with a pose at every window end (paper §4.2; docs/methods.md §3.1–3.3).
 //!
 //! EventNeRF sums the events between two stored views and renders both views. Here the two
 //! ends of every window are arbitrary times `τ_s < τ_e`, and the cameras there are

@@ -1,6 +1,6 @@
 //! 2-D warps of normalised image coordinates (see [`crate::image::NormalizedFrame`]) for the
-//! planar alignment study (BARF §2.2, `warp.py`), with analytic Jacobians with respect to the
-//! warp parameters.
+//! planar alignment study (docs/methods.md §2.1; BARF `warp.py`), with analytic Jacobians with
+//! respect to the warp parameters.
 //!
 //! * [`WarpKind::Se2`], `p = [θ, tx, ty]`: `x' = R(θ)·x + t`, `R(θ) = [[cos θ, −sin θ],
 //!   [sin θ, cos θ]]`. Positive θ turns +x towards +y, counter-clockwise in the (x, y) plane as

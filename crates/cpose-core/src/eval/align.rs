@@ -186,7 +186,7 @@ impl BarfSim3 {
     }
 
     /// A GT pose `world_from_cam` mapped into the learned (predicted) frame, the inverse of
-    /// [`BarfSim3::align_pose`] (BARF `evaluate_full` for test poses, §2.5):
+    /// [`BarfSim3::align_pose`] (BARF `evaluate_full` for test poses, docs/methods.md §2.3):
     /// `c' = s1·Rᵀ·(c_gt − t0)/s0 + t1`, rotation `Rᵀ·R_gt` (w2c: `R_gt_w2c·R`).
     pub fn gt_to_learned(&self, world_from_cam_gt: &Isometry3<f64>) -> Isometry3<f64> {
         let c = world_from_cam_gt.translation.vector;
@@ -479,7 +479,7 @@ mod tests {
         assert!(errors.rot_err_relative_deg < 1e-9);
         assert!(errors.trans_err < 1e-12, "{}", errors.trans_err);
         assert!((errors.alignment.s0 / errors.alignment.s1 - 1.0 / 0.3).abs() < 1e-12);
-        // Round trip through the learned frame (§2.5).
+        // Round trip through the learned frame (docs/methods.md §2.3).
         for (g, p) in gt.iter().zip(&pred) {
             let back = errors.alignment.gt_to_learned(g);
             assert!((back.translation.vector - p.translation.vector).norm() < 1e-12);

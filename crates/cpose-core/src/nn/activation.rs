@@ -2,7 +2,7 @@
 //!
 //! A hidden layer computes `h = σ(z)` together with the first and second time derivatives
 //! `ḣ = σ'(z) ż`, `ḧ = σ'(z) z̈ + σ''(z) ż²`; the reverse pass through these three streams needs
-//! `σ'`, `σ''` and `σ'''` (DESIGN.md, "Exact time derivatives of an MLP, cheaply").
+//! `σ'`, `σ''` and `σ'''` (docs/methods.md §5.2).
 //! `σ''` and `σ'''` are written as functions of `h = σ(z)` and `s1 = σ'(z)`, so the forward pass
 //! stores only `h` and `s1`.
 
@@ -107,7 +107,7 @@ impl Activation {
     }
 
     /// Reverse of [`Activation::tangent_forward`]: given `z` streams and the cotangents
-    /// `[gh, gḣ, gḧ]`, returns `[gz, gż, gz̈]` (rust-ecosystem.md §2.1):
+    /// `[gh, gḣ, gḧ]`, returns `[gz, gż, gz̈]` (docs/methods.md §5.2):
     /// `gz = gh σ' + gḣ σ'' ż + gḧ (σ''' ż² + σ'' z̈)`, `gż = gḣ σ' + 2 gḧ σ'' ż`, `gz̈ = gḧ σ'`.
     #[inline]
     pub fn tangent_backward<S: Real>(self, z: [S; 3], g: [S; 3], streams: usize) -> [S; 3] {

@@ -1,5 +1,5 @@
 //! Adam (Kingma & Ba) exactly as PyTorch's `torch.optim.Adam` (no weight decay, no amsgrad), and
-//! the exponential learning-rate decay of the paper's code (algorithms.md §1.3).
+//! the exponential learning-rate decay of the paper's code (docs/methods.md §1.2).
 
 use crate::{ParamKind, PoseField, Real};
 

@@ -1,4 +1,4 @@
-//! BARF's coarse-to-fine weights (algorithms.md §2.2, the same in 2-D and 3-D): the one
+//! BARF's coarse-to-fine weights (docs/methods.md §2.1, the same in 2-D and 3-D): the one
 //! implementation behind the sinusoidal embedding's bands
 //! ([`Embedding::set_coarse_to_fine`](super::Embedding::set_coarse_to_fine)) and the grid
 //! fields' levels in `cpose-nerf`.

@@ -1,5 +1,5 @@
 //! A multilayer perceptron with an optional skip connection, tangent streams and a hand-written
-//! reverse pass through them (DESIGN.md, "Exact time derivatives of an MLP, cheaply").
+//! reverse pass through them (docs/methods.md §5.2).
 //!
 //! Layout. Activations are `[rows × features]` column-major with `rows = streams · b`: the `b`
 //! values first, then the `b` first derivatives, then the `b` second derivatives (with respect to
@@ -438,7 +438,7 @@ fn activate_column<S: Real>(
     }
 }
 
-/// In place, `g ← [gz; gż; gz̈]` from `g = [gh; gḣ; gḧ]` for one column (rust-ecosystem.md §2.1).
+/// In place, `g ← [gz; gż; gz̈]` from `g = [gh; gḣ; gḧ]` for one column (docs/methods.md §5.2).
 #[inline]
 fn adjoint_column<S: Real>(
     act: Activation,

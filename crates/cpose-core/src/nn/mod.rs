@@ -24,7 +24,7 @@ pub use mlp::{Init, Mlp, MlpSpec, MlpWorkspace};
 /// Rows (samples × streams) per part below which splitting a batch across threads does not pay.
 ///
 /// Each part runs single-threaded matrix products (`Par::Seq`) and the parts' weight gradients
-/// are summed (DESIGN.md, "Performance model"). On a busy machine (other processes on both
+/// are summed (docs/methods.md §5.1). On a busy machine (other processes on both
 /// cores) a split loses even at large batches, so small batches stay on one thread.
 pub const MIN_ROWS_PER_PART: usize = 128;
 

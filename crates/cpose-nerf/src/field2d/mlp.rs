@@ -1,4 +1,4 @@
-//! [`PeMlpField`]: BARF's neural image (algorithms.md §2.2; BARF `model/planar.py`).
+//! [`PeMlpField`]: BARF's neural image (docs/methods.md §2.1; BARF `model/planar.py`).
 
 use cpose_core::Real;
 use cpose_core::nn::{Accum, Activation, Embedding, Encoding, Init, Mlp, MlpSpec, MlpWorkspace};
@@ -92,7 +92,7 @@ impl PeMlpConfig {
     }
 }
 
-/// BARF's neural image (algorithms.md §2.2; BARF `model/planar.py`): a ReLU MLP on the
+/// BARF's neural image (docs/methods.md §2.1; BARF `model/planar.py`): a ReLU MLP on the
 /// positional encoding of the point, with coarse-to-fine weighted bands.
 ///
 /// `γ(p) = [x, y, w_k sin(2^k π x), w_k cos(2^k π x), w_k sin(2^k π y), w_k cos(2^k π y)]`

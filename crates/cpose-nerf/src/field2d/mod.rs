@@ -1,4 +1,4 @@
-//! 2-D neural image fields for planar image alignment (BARF §4.1; algorithms.md §2.2).
+//! 2-D neural image fields for planar image alignment (BARF §4.1; docs/methods.md §2.1).
 //!
 //! A field maps a point in BARF's normalised image coordinates (the long side spans `[−1, 1]`,
 //! e.g. `[−1, 1] × [−0.75, 0.75]` for a 4:3 landscape image) to an RGB colour in `(0, 1)`, and

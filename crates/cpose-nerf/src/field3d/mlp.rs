@@ -1,4 +1,4 @@
-//! [`NerfMlpField`]: BARF's NeRF MLP (algorithms.md §2.3; BARF `model/nerf.py`).
+//! [`NerfMlpField`]: BARF's NeRF MLP (docs/methods.md §2.2; BARF `model/nerf.py`).
 
 use std::fmt;
 use std::ops::Range;
@@ -159,7 +159,7 @@ impl NerfMlpConfig {
     }
 }
 
-/// BARF's NeRF MLP (algorithms.md §2.3; BARF `model/nerf.py`) without view dependence: the
+/// BARF's NeRF MLP (docs/methods.md §2.2; BARF `model/nerf.py`) without view dependence: the
 /// fidelity 3-D field.
 ///
 /// On the field point `p` (normalised, contracted when unbounded; see the module docs):

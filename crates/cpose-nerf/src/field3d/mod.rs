@@ -1,4 +1,4 @@
-//! 3-D radiance fields for NeRF (BARF §4.2; algorithms.md §2.3).
+//! 3-D radiance fields for NeRF (BARF §4.2; docs/methods.md §2.2).
 //!
 //! A field maps a world point `x ∈ R³` to a density `σ ≥ 0` (per world unit of length, the unit
 //! of the renderer's `δ`, see [`crate::render::volume`]) and a colour `rgb ∈ (0, 1)³`, and
@@ -300,7 +300,7 @@ impl RadianceFieldConfig {
 /// ~65k). Smaller batches (a few rays, tests) stay on the calling thread: there the split's
 /// fixed costs — the hand-off, and per extra part a sum of the MLP gradient (0.6 M values for
 /// BARF's MLP) — are a noticeable fraction of a pass, and on a busy machine a split of a small
-/// batch loses outright (DESIGN.md, "Performance model").
+/// batch loses outright (docs/methods.md §5.1).
 pub const PARALLEL_MIN_POINTS: usize = 4096;
 
 /// Rows per MLP call within a part, so that a chunk's activations (1 MiB for a 256-wide

@@ -1,4 +1,4 @@
-//! Evaluation of a trained run, as BARF (algorithms.md §2.4–2.5): pose errors after Procrustes
+//! Evaluation of a trained run, as BARF (docs/methods.md §2.3): pose errors after Procrustes
 //! alignment of the camera centres, novel views rendered from the ground-truth test poses
 //! mapped into the learned frame, with and without test-time photometric refinement of each
 //! test pose, PSNR and SSIM; and a top-down trajectory plot.

@@ -1,5 +1,5 @@
 //! Task `nerf`: NeRF from noisy or unknown camera poses (paper §4.1.2, its supplement's noise
-//! tables and the LLFF table; BARF's protocol, algorithms.md §2.3–2.6).
+//! tables and the LLFF table; BARF's protocol, docs/methods.md §2.2–2.3).
 //!
 //! A radiance field is trained from images whose poses are wrong, and the poses are refined
 //! jointly as a correction of the initial ones, `world_from_cam_i = C(t_i) ∘ init_i`

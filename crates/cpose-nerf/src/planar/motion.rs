@@ -7,9 +7,9 @@
 //! through `W_i = G_0⁻¹ ∘ G_i`, so the first patch is the centre crop (identity) and fixes the
 //! gauge of the learned image.
 //!
-//! **Homography (BARF's own protocol, algorithms.md §2.2).** Patch `i ≥ 1` gets 8 sl(3) parameters
-//! `N(0, σ_h²)` plus a translation offset `(±δ, ±δ)` cycling through the four diagonals; patch 0 is
-//! the identity. There is no time correlation.
+//! **Homography (BARF's own protocol, docs/methods.md §2.1).** Patch `i ≥ 1` gets 8 sl(3)
+//! parameters `N(0, σ_h²)` plus a translation offset `(±δ, ±δ)` cycling through the four
+//! diagonals; patch 0 is the identity. There is no time correlation.
 //!
 //! Both resample until every warped crop corner lies inside the image.
 
