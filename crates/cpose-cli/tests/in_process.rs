@@ -27,7 +27,7 @@ struct Params {
 
 fn fit(input: &TaskInput) -> anyhow::Result<()> {
     let params: Params = input.config.parse_params()?;
-    let time_range = TimeRange::new(0.0, 2.0).ok_or_else(|| anyhow::anyhow!("bad range"))?;
+    let time_range = TimeRange::new(0.0, 2.0)?;
     let ctx = FieldContext {
         time_range,
         frame_times_secs: vec![0.0, 1.0, 2.0],

@@ -19,7 +19,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use nalgebra::{Quaternion, Vector3};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -526,6 +526,78 @@ impl AsRef<Path> for TempDir {
 impl AsRef<std::ffi::OsStr> for TempDir {
     fn as_ref(&self) -> &std::ffi::OsStr {
         self.0.as_os_str()
+    }
+}
+
+/// A batch of three samples with arbitrary (non-degenerate) values of every output, to check
+/// losses on.
+pub fn arbitrary_batch() -> PoseBatch {
+    let mut b = PoseBatch::zeros(3, Order::Acceleration);
+    for i in 0..3 {
+        let x = i as f64;
+        b.rotation[i] =
+            *UnitQuaternion::from_scaled_axis(Vector3::new(0.3 + x, -0.2, 0.5 * x)).quaternion();
+        b.rotation_rate[i] = Quaternion::new(0.1, -0.3 + x, 0.2, 0.05 * x);
+        b.translation[i] = Vector3::new(0.4, -x, 1.3);
+        b.lin_vel_world[i] = Vector3::new(-0.2, 0.5 * x, 0.3);
+        b.lin_acc_world[i] = Vector3::new(0.7 - x, 0.2, -0.4 * x + 0.1);
+    }
+    b
+}
+
+/// One scalar output of a batch.
+#[derive(Clone, Copy, Debug)]
+enum Slot {
+    Rotation(usize, usize),
+    RotationRate(usize, usize),
+    Translation(usize, usize),
+    LinVel(usize, usize),
+    LinAcc(usize, usize),
+}
+
+fn slot(b: &mut PoseBatch, s: Slot) -> &mut f64 {
+    match s {
+        Slot::Rotation(i, k) => &mut b.rotation[i].coords[k],
+        Slot::RotationRate(i, k) => &mut b.rotation_rate[i].coords[k],
+        Slot::Translation(i, k) => &mut b.translation[i][k],
+        Slot::LinVel(i, k) => &mut b.lin_vel_world[i][k],
+        Slot::LinAcc(i, k) => &mut b.lin_acc_world[i][k],
+    }
+}
+
+/// Checks a loss on [`arbitrary_batch`] — its value returned, its cotangent accumulated into the
+/// second batch — against central differences of its value, one output component at a time
+/// (L1 losses are smooth away from zero residuals, which these values avoid).
+///
+/// # Panics
+/// If a cotangent entry differs from its central difference by more than `1e-6`.
+pub fn check_batch_loss_gradient(loss: impl Fn(&PoseBatch, &mut PoseBatch) -> f64) {
+    let p = arbitrary_batch();
+    let mut g = PoseBatch::zeros(3, Order::Acceleration);
+    loss(&p, &mut g);
+    let value = |b: &PoseBatch| loss(b, &mut PoseBatch::zeros(3, Order::Acceleration));
+    let h = 1e-7;
+    let slots = (0..3).flat_map(|i| {
+        (0..4)
+            .flat_map(move |k| [Slot::Rotation(i, k), Slot::RotationRate(i, k)])
+            .chain((0..3).flat_map(move |k| {
+                [
+                    Slot::Translation(i, k),
+                    Slot::LinVel(i, k),
+                    Slot::LinAcc(i, k),
+                ]
+            }))
+    });
+    for s in slots {
+        let (mut plus, mut minus) = (p.clone(), p.clone());
+        *slot(&mut plus, s) += h;
+        *slot(&mut minus, s) -= h;
+        let fd = (value(&plus) - value(&minus)) / (2.0 * h);
+        let an = *slot(&mut g, s);
+        assert!(
+            (fd - an).abs() < 1e-6,
+            "{s:?}: central difference {fd} vs cotangent {an}"
+        );
     }
 }
 

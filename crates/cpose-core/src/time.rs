@@ -41,12 +41,19 @@ pub struct TimeRange {
 }
 
 impl TimeRange {
-    /// A range `[start_secs, end_secs]`; `None` unless both are finite and `start_secs < end_secs`.
-    pub fn new(start_secs: f64, end_secs: f64) -> Option<Self> {
-        (start_secs.is_finite() && end_secs.is_finite() && start_secs < end_secs).then_some(Self {
-            start_secs,
-            end_secs,
-        })
+    /// A range `[start_secs, end_secs]`; an error unless both are finite and
+    /// `start_secs < end_secs`.
+    pub fn new(start_secs: f64, end_secs: f64) -> Result<Self, crate::PoseFieldError> {
+        if start_secs.is_finite() && end_secs.is_finite() && start_secs < end_secs {
+            Ok(Self {
+                start_secs,
+                end_secs,
+            })
+        } else {
+            Err(crate::PoseFieldError::Invalid(format!(
+                "time range [{start_secs} s, {end_secs} s]: expected finite ends, start < end"
+            )))
+        }
     }
     /// `end_secs − start_secs`.
     pub fn duration_secs(&self) -> f64 {
@@ -83,8 +90,12 @@ mod tests {
         assert_eq!(r.normalize(2.0), -1.0);
         assert_eq!(r.normalize(6.0), 1.0);
         assert_eq!(r.normalized_rate(), 0.5);
-        assert!(TimeRange::new(1.0, 1.0).is_none());
-        assert!(TimeRange::new(0.0, f64::NAN).is_none());
+        let err = TimeRange::new(1.0, 1.0).unwrap_err().to_string();
+        assert!(
+            err.contains("time range [1 s, 1 s]: expected finite ends, start < end"),
+            "{err}"
+        );
+        assert!(TimeRange::new(0.0, f64::NAN).is_err());
     }
 
     #[test]

@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 
 pub mod euroc;
-pub mod imu;
 pub mod increment;
 pub mod losses;
 pub mod sim;
@@ -13,8 +12,8 @@ mod slam_imu;
 pub mod tracker;
 mod trajectory;
 
+pub use cpose_core::fit::{ImuMode, ImuSample};
 pub use cpose_slam;
-pub use imu::{ImuMode, ImuSample};
 
 /// Errors reading IMU and trajectory data.
 #[derive(Debug, thiserror::Error)]

@@ -11,8 +11,8 @@ use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::ImuSample;
 use crate::euroc::ImuNoise;
-use crate::imu::ImuSample;
 
 /// Noise of a simulated IMU (continuous-time densities, as in EuRoC's `sensor.yaml`).
 #[derive(Clone, Copy, Debug, PartialEq)]

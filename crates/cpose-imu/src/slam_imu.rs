@@ -32,9 +32,9 @@ use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::euroc::EurocSequence;
-use crate::imu::{ImuMode, ImuSample};
 use crate::sim::{NoiseModel, imu_from_poses};
 use crate::tracker::{ImuPoseNet, ImuTrackConfig, RelativeImu};
+use crate::{ImuMode, ImuSample};
 
 inventory::submit! {
     Task {

@@ -61,9 +61,9 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::imu::{ImuMode, ImuSample};
 use crate::increment::MotionIncrement;
 use crate::losses;
+use crate::{ImuMode, ImuSample};
 
 /// IMU coupling in tracking; `[imu]` in a `slam_imu` config.
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]

@@ -8,7 +8,8 @@
 //! known poses is the reference (`interp`).
 //!
 //! Fields work in a normalised frame (rotated to the mean known orientation, centred and scaled
-//! so that PoseNet's tanh-bounded translation fits; see `Normalisation`); errors are reported in
+//! so that PoseNet's tanh-bounded translation fits: `cpose_core::fit::normalising_frame`); errors are
+//! reported in
 //! degrees and metres of the original world.
 //!
 //! Besides `traj_<imu>_<method>.txt`, every unit draws `trajectory_<imu>_<method>.png` (the
@@ -22,22 +23,19 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use cpose_core::config::Config;
 use cpose_core::eval::{self, Sim3, Trajectory};
-use cpose_core::nn::{Adam, Convergence, StopReason, StopRule};
+use cpose_core::fit::{self, Fit, FitData, FitReport, FitSettings, normalising_frame};
+use cpose_core::nn::StopRule;
 use cpose_core::plot::{self, Line, Panel, SeriesStyle, TrajectorySeries, YScale};
 use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::pose_field::sinusoid::SinusoidMotion;
 use cpose_core::registry::{self, FieldContext, Task, TaskInput, build_pose_field};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
-use cpose_core::{Order, ParamKind, PoseBatch, PoseField, TimeRange};
+use cpose_core::{Order, PoseBatch, PoseField, TimeRange};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use rand::SeedableRng;
-use rand::seq::SliceRandom;
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::euroc::EurocSequence;
-use crate::imu::{ImuMode, ImuSample};
-use crate::losses;
+use crate::{ImuMode, ImuSample};
 use cpose_core::gravity_world;
 
 inventory::submit! {
@@ -190,74 +188,58 @@ struct FitConfig {
 
 impl Default for FitConfig {
     fn default() -> Self {
-        let stop = StopRule::default();
+        let s = FitSettings::default();
         Self {
-            iterations: 20000,
-            tolerance_deg: 0.01,
-            tolerance_m: 1e-4,
-            check_every: stop.check_every,
-            plateau_steps: stop.plateau_steps,
-            plateau_rel: stop.plateau_rel,
-            lr_factor: stop.lr_factor,
-            lr_drops: stop.lr_drops,
+            iterations: s.iterations,
+            tolerance_deg: s.tolerance_deg,
+            tolerance_m: s.tolerance_m,
+            check_every: s.stop.check_every,
+            plateau_steps: s.stop.plateau_steps,
+            plateau_rel: s.stop.plateau_rel,
+            lr_factor: s.stop.lr_factor,
+            lr_drops: s.stop.lr_drops,
             imu: vec![ImuMode::None, ImuMode::Tight],
             fields: None,
-            pose_weight: 1.0,
-            gyro_weight: 1.0,
-            accel_weight: 1.0,
-            imu_batch: 64,
-            loose_window_secs: 0.1,
-            lr_translation: 1e-3,
-            lr_rotation: 2e-4,
-            lr_pose: 1e-2,
+            pose_weight: s.pose_weight,
+            gyro_weight: s.gyro_weight,
+            accel_weight: s.accel_weight,
+            imu_batch: s.imu_batch,
+            loose_window_secs: s.loose_window_secs,
+            lr_translation: s.lr_translation,
+            lr_rotation: s.lr_rotation,
+            lr_pose: s.lr_pose,
         }
     }
 }
 
 impl FitConfig {
-    fn stop_rule(&self) -> StopRule {
-        StopRule {
-            check_every: self.check_every,
-            plateau_steps: self.plateau_steps,
-            plateau_rel: self.plateau_rel,
-            lr_factor: self.lr_factor,
-            lr_drops: self.lr_drops,
+    /// The fit's settings with a budget of `iterations` steps.
+    fn settings(&self, iterations: usize) -> FitSettings {
+        FitSettings {
+            iterations,
+            tolerance_deg: self.tolerance_deg,
+            tolerance_m: self.tolerance_m,
+            stop: StopRule {
+                check_every: self.check_every,
+                plateau_steps: self.plateau_steps,
+                plateau_rel: self.plateau_rel,
+                lr_factor: self.lr_factor,
+                lr_drops: self.lr_drops,
+            },
+            pose_weight: self.pose_weight,
+            gyro_weight: self.gyro_weight,
+            accel_weight: self.accel_weight,
+            imu_batch: self.imu_batch,
+            loose_window_secs: self.loose_window_secs,
+            lr_translation: self.lr_translation,
+            lr_rotation: self.lr_rotation,
+            lr_pose: self.lr_pose,
         }
     }
 
     /// Errors naming the key of a setting out of range.
     fn validate(&self) -> Result<(), String> {
-        self.stop_rule().validate()?;
-        for (key, value) in [
-            ("tolerance_deg", self.tolerance_deg),
-            ("tolerance_m", self.tolerance_m),
-        ] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(format!("{key} = {value} must be a number ≥ 0"));
-            }
-        }
-        for (key, value) in [
-            ("lr_translation", self.lr_translation),
-            ("lr_rotation", self.lr_rotation),
-            ("lr_pose", self.lr_pose),
-        ] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(format!("{key} = {value} must be a positive number"));
-            }
-        }
-        for (key, value) in [
-            ("pose_weight", self.pose_weight),
-            ("gyro_weight", self.gyro_weight),
-            ("accel_weight", self.accel_weight),
-        ] {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(format!("{key} = {value} must be a number ≥ 0"));
-            }
-        }
-        if self.imu_batch == 0 {
-            return Err("imu_batch = 0 must be at least 1".into());
-        }
-        Ok(())
+        self.settings(self.iterations).validate()
     }
 }
 
@@ -441,67 +423,6 @@ impl Sequence {
     }
 }
 
-/// The frame the fields work in: `R_n = R_refᵀ R` and `p_n = (R_refᵀ p − c) / s`. The reference
-/// rotation (the mean of the known rotations) puts every field's identity start near the data,
-/// so no method starts up to 180° away from it; centring and scaling (the bounding box of the
-/// known positions in that frame, scaled by 1.5× its largest half-extent) keep PoseNet's
-/// tanh-bounded translation in range.
-struct Normalisation {
-    world_from_field: UnitQuaternion<f64>,
-    centre: Vector3<f64>,
-    scale: f64,
-}
-
-impl Normalisation {
-    fn fit(poses: &[Isometry3<f64>]) -> Self {
-        // Chordal mean: sign-aligned quaternions, averaged, normalised.
-        let first = *poses[0].rotation.quaternion();
-        let sum = poses
-            .iter()
-            .fold(nalgebra::Quaternion::new(0.0, 0.0, 0.0, 0.0), |acc, p| {
-                let q = *p.rotation.quaternion();
-                if q.coords.dot(&first.coords) < 0.0 {
-                    acc - q
-                } else {
-                    acc + q
-                }
-            });
-        let world_from_field = UnitQuaternion::new_normalize(sum);
-        let rotated = poses
-            .iter()
-            .map(|p| world_from_field.inverse_transform_vector(&p.translation.vector));
-        let lo = rotated
-            .clone()
-            .fold(Vector3::repeat(f64::INFINITY), |a, p| a.inf(&p));
-        let hi = rotated.fold(Vector3::repeat(f64::NEG_INFINITY), |a, p| a.sup(&p));
-        Self {
-            world_from_field,
-            centre: (lo + hi) / 2.0,
-            scale: 1.5 * ((hi - lo) / 2.0).max().max(1e-3),
-        }
-    }
-    fn to_field_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        let field_from_world = self.world_from_field.inverse();
-        let p = (field_from_world * pose.translation.vector - self.centre) / self.scale;
-        Isometry3::from_parts(Translation3::from(p), field_from_world * pose.rotation)
-    }
-    fn to_world_frame(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        self.frame().transform_pose(pose)
-    }
-    /// The field's frame in the world, for its saved file: `p_world = R (s p + c)`.
-    fn frame(&self) -> Sim3 {
-        Sim3 {
-            rotation: self.world_from_field.to_rotation_matrix(),
-            translation: self.world_from_field * self.centre,
-            scale: self.scale,
-        }
-    }
-    /// Gravity in the field's frame.
-    fn gravity(&self) -> Vector3<f64> {
-        self.world_from_field.inverse() * gravity_world()
-    }
-}
-
 /// Errors of one method, in the units of their names.
 #[derive(Debug, Serialize)]
 struct MethodMetrics {
@@ -518,18 +439,7 @@ struct MethodMetrics {
     final_loss: Option<f64>,
     /// How the fit ended (none for the interpolation reference).
     #[serde(flatten)]
-    fit: Option<FitOutcome>,
-}
-
-/// How a fit ended: its step count, why it stopped, and its mean errors on the known poses it
-/// was fitted to (within `[fit] tolerance_deg` and `tolerance_m` when it converged).
-#[derive(Debug, Serialize)]
-struct FitOutcome {
-    fit_steps: usize,
-    fit_stop: StopReason,
-    fit_converged: bool,
-    known_rot_err_deg: f64,
-    known_trans_err_m: f64,
+    fit: Option<FitReport>,
 }
 
 /// Mean and RMSE of the rotation (degrees) and translation (metres) errors: evo's APE
@@ -685,202 +595,42 @@ fn interpolate(seq: &Sequence, t: f64) -> (Isometry3<f64>, Vector3<f64>) {
     )
 }
 
-/// Everything one fit needs, allocated once.
-struct Fit<'a> {
-    seq: &'a Sequence,
-    norm: &'a Normalisation,
-    cfg: &'a FitConfig,
-    known_targets: Vec<Isometry3<f64>>,
-    /// The known poses in the world frame.
-    known_truth: &'a [Isometry3<f64>],
-    /// Held-out times and poses, for the live error.
+/// What every method's fit shares: the known poses and IMU readings, the frame, the schedule,
+/// and the held-out poses its live errors are measured on.
+struct Fitting<'a> {
+    data: FitData<'a>,
+    frame: Sim3,
+    settings: FitSettings,
     held_times: &'a [f64],
     held_truth: &'a [Isometry3<f64>],
 }
 
-impl Fit<'_> {
-    /// Mean rotation (degrees) and translation (metres) errors of `field` at `times` against
-    /// `truth` (world frame).
-    fn errors_at(
-        &self,
-        field: &dyn PoseField,
-        times: &[f64],
-        truth: &[Isometry3<f64>],
-    ) -> anyhow::Result<(f64, f64)> {
-        let mut out = PoseBatch::default();
-        field.evaluate(times, Order::Pose, &mut out)?;
-        let estimated: Vec<Isometry3<f64>> = (0..times.len())
-            .map(|i| self.norm.to_world_frame(&out.world_from_body(i)))
-            .collect();
-        let (rot, _, trans, _) = pose_errors(&estimated, truth)?;
-        Ok((rot, trans))
-    }
-
-    /// Errors on the held-out poses.
-    fn held_out_errors(&self, field: &dyn PoseField) -> anyhow::Result<(f64, f64)> {
-        self.errors_at(field, self.held_times, self.held_truth)
-    }
-
-    /// Errors on the known poses, which the fit is supervised with.
-    fn known_errors(&self, field: &dyn PoseField) -> anyhow::Result<(f64, f64)> {
-        self.errors_at(field, &self.seq.known_times, self.known_truth)
-    }
-
-    fn within_tolerance(&self, (rot_deg, trans_m): (f64, f64)) -> bool {
-        rot_deg <= self.cfg.tolerance_deg && trans_m <= self.cfg.tolerance_m
-    }
-
-    /// Adam on `L = L_pose + w_g L_gyro + w_a L_accel` until the known poses are within
-    /// tolerance, `L_pose` is on a plateau or `iterations` steps are spent ([`StopRule`]),
-    /// reporting the loss and the known and held-out errors and checkpointing through `unit`;
-    /// returns the mean `L_pose` of the last window and how the fit ended.
+impl Fitting<'_> {
+    /// Fits `field` with the IMU terms of `mode` ([`Fit`]), reporting the loss and the known and
+    /// held-out errors and checkpointing through `unit`; returns how the fit ended.
     fn run(
         &self,
         field: &mut dyn PoseField,
         mode: ImuMode,
-        iterations: usize,
         seed: u64,
         unit: &mut Unit,
-    ) -> anyhow::Result<(f64, FitOutcome)> {
-        let mut convergence = Convergence::new(self.cfg.stop_rule());
-        let mut stop = StopReason::Budget;
-        let mut adam = Adam::<f32>::new(field.num_params());
-        let mut grad = vec![0.0f32; field.num_params()];
-        let (mut out, mut cot) = (PoseBatch::default(), PoseBatch::default());
-        let batch = self.cfg.imu_batch.min(self.seq.imu.len()).max(1);
-        let (mut imu_times, mut gyro, mut accel) = (
-            Vec::with_capacity(batch),
-            Vec::with_capacity(batch),
-            Vec::with_capacity(batch),
-        );
-        let mut imu_order: Vec<usize> = (0..self.seq.imu.len()).collect();
-        let mut pairs = Vec::with_capacity(batch);
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let mut cursor = imu_order.len();
-        let mut first = 0;
-        let mut pose_loss = f64::NAN;
-        unit.set_steps(iterations);
+    ) -> anyhow::Result<FitReport> {
+        let s = &self.settings;
+        let mut fit = Fit::new(&*field, self.data, self.frame, s, mode, seed)?;
+        unit.set_steps(s.iterations);
         if let Some((done, mut r)) = unit.resume() {
-            r.pose_field(field)?;
-            r.adam(&mut adam)?;
-            rng = r.rng()?;
-            let order = r.f64s()?;
-            if order.len() != imu_order.len() {
-                bail!(
-                    "{}: the checkpoint's IMU order does not match",
-                    r.path().display()
-                );
-            }
-            imu_order = order.into_iter().map(|i| i as usize).collect();
-            cursor = r.u64()? as usize;
-            pose_loss = r.f64()?;
-            let state = r.f64s()?;
-            convergence.set_state(state.as_slice().try_into().with_context(|| {
-                format!(
-                    "{}: the checkpoint's fit state is corrupt",
-                    r.path().display()
-                )
-            })?);
-            first = done as usize;
+            fit.restore(field, done, &mut r)?;
         }
-        let g = self.norm.gravity();
-        let mut steps = first;
-        for it in first..iterations {
-            grad.fill(0.0);
-            let n = self.seq.known_times.len();
-            field.forward(&self.seq.known_times, Order::Pose, &mut out)?;
-            cot.reset(n, Order::Pose);
-            let mut loss = losses::pose_l2(
-                &out,
-                &self.known_targets,
-                self.cfg.pose_weight,
-                (1.0, 1.0),
-                &mut cot,
-            );
-            field.backward(&self.seq.known_times, &cot, &mut grad)?;
-            // The fit's own term: IMU terms on real readings keep a floor of sensor noise that
-            // would pass for a plateau while the known poses are still far off.
-            pose_loss = loss;
-            if mode == ImuMode::Loose {
-                // Windows [t_k, t_k + window] from a shuffled IMU index; the gyro integrated
-                // over each supervises the rotation between its ends.
-                imu_times.clear();
-                pairs.clear();
-                for _ in 0..batch {
-                    if cursor == imu_order.len() {
-                        imu_order.shuffle(&mut rng);
-                        cursor = 0;
-                    }
-                    let t0 = self.seq.imu[imu_order[cursor]].t_secs;
-                    cursor += 1;
-                    let t1 = t0 + self.cfg.loose_window_secs;
-                    if let Some(dq) = losses::integrate_gyro(&self.seq.imu, t0, t1) {
-                        pairs.push((imu_times.len(), imu_times.len() + 1, dq));
-                        imu_times.extend([t0, t1]);
-                    }
-                }
-                if !pairs.is_empty() {
-                    field.forward(&imu_times, Order::Pose, &mut out)?;
-                    cot.reset(imu_times.len(), Order::Pose);
-                    loss += losses::gyro_loose_l1(&out, &pairs, self.cfg.gyro_weight, &mut cot);
-                    field.backward(&imu_times, &cot, &mut grad)?;
-                }
-            } else if mode != ImuMode::None {
-                imu_times.clear();
-                gyro.clear();
-                accel.clear();
-                for _ in 0..batch {
-                    if cursor == imu_order.len() {
-                        imu_order.shuffle(&mut rng);
-                        cursor = 0;
-                    }
-                    let s = &self.seq.imu[imu_order[cursor]];
-                    cursor += 1;
-                    imu_times.push(s.t_secs);
-                    gyro.push(s.gyro);
-                    accel.push(s.accel);
-                }
-                let order = mode.order();
-                field.forward(&imu_times, order, &mut out)?;
-                cot.reset(batch, order);
-                if mode.gyro() {
-                    loss += losses::gyro_tight_l1(&out, &gyro, self.cfg.gyro_weight, &mut cot);
-                }
-                if mode.accel() {
-                    loss += losses::accel_l1(
-                        &out,
-                        &accel,
-                        &g,
-                        self.norm.scale,
-                        self.cfg.accel_weight,
-                        &mut cot,
-                    );
-                }
-                field.backward(&imu_times, &cot, &mut grad)?;
-            }
-            if !loss.is_finite() || grad.iter().any(|x| !x.is_finite()) {
-                bail!(
-                    "the loss or its gradient became {loss} at iteration {it}; stopping this fit \
-                     (the last good checkpoint is kept)"
-                );
-            }
-            let scale = convergence.lr_scale();
-            adam.step_pose_field(field, &grad, |kind| {
-                scale
-                    * match kind {
-                        ParamKind::Translation => self.cfg.lr_translation,
-                        ParamKind::Rotation => self.cfg.lr_rotation,
-                        ParamKind::Pose => self.cfg.lr_pose,
-                    }
-            });
-            let done = it + 1;
+        loop {
+            let stopped = fit.step(field)?;
+            let done = fit.steps();
             if unit.report_due(done) {
-                let (rot, trans) = self.held_out_errors(field)?;
-                let (known_rot, known_trans) = self.known_errors(field)?;
+                let (rot, trans) = fit.errors_at(&*field, self.held_times, self.held_truth)?;
+                let (known_rot, known_trans) = fit.known_errors(&*field)?;
                 unit.report(
                     done,
                     &[
-                        ("loss", loss),
+                        ("loss", fit.loss()),
                         ("known_rot_err_deg", known_rot),
                         ("known_trans_err_m", known_trans),
                         ("rot_err_deg", rot),
@@ -888,36 +638,18 @@ impl Fit<'_> {
                     ],
                 );
             }
-            steps = done;
-            if convergence.observe(pose_loss) {
-                let known = self.known_errors(field)?;
-                if let Some(reason) = convergence.check(self.within_tolerance(known)) {
-                    stop = reason;
-                    break;
-                }
+            if stopped {
+                break;
             }
-            if done < iterations && unit.checkpoint_due() {
+            if unit.checkpoint_due() {
                 unit.checkpoint(done as u64, |w| {
-                    w.pose_field(field);
-                    w.adam(&adam);
-                    w.rng(&rng);
-                    w.f64s(&imu_order.iter().map(|&i| i as f64).collect::<Vec<_>>());
-                    w.u64(cursor as u64);
-                    w.f64(pose_loss);
-                    w.f64s(&convergence.state());
+                    fit.save(&*field, w);
                     Ok(())
                 })?;
             }
         }
-        let known = self.known_errors(field)?;
-        let outcome = FitOutcome {
-            fit_steps: steps,
-            fit_stop: stop,
-            fit_converged: self.within_tolerance(known),
-            known_rot_err_deg: known.0,
-            known_trans_err_m: known.1,
-        };
-        let verdict = if outcome.fit_converged {
+        let report = fit.report(&*field)?;
+        let verdict = if report.converged {
             "within"
         } else {
             "warning: above"
@@ -925,14 +657,14 @@ impl Fit<'_> {
         unit.log(format_args!(
             "fit stopped after {} steps ({}): known poses {:.4}° and {:.2e} m, {verdict} the \
              tolerance {}° and {} m",
-            outcome.fit_steps,
-            stop.key(),
-            known.0,
-            known.1,
-            self.cfg.tolerance_deg,
-            self.cfg.tolerance_m
+            report.steps,
+            report.stop.key(),
+            report.known_rot_err_deg,
+            report.known_trans_err_m,
+            s.tolerance_deg,
+            s.tolerance_m
         ));
-        Ok((convergence.last_mean().unwrap_or(pose_loss), outcome))
+        Ok(report)
     }
 }
 
@@ -1015,7 +747,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         );
     }
     let known_poses: Vec<Isometry3<f64>> = seq.known.iter().map(|&i| seq.poses[i]).collect();
-    let norm = Normalisation::fit(&known_poses);
+    let frame = normalising_frame(&known_poses);
     let held_out = seq.held_out();
     let held_times: Vec<f64> = held_out.iter().map(|&i| seq.times[i]).collect();
     let held_truth: Vec<Isometry3<f64>> = held_out.iter().map(|&i| seq.poses[i]).collect();
@@ -1028,8 +760,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         exp.data.known_every,
         held_out.len(),
         seq.imu.len(),
-        norm.centre.as_slice(),
-        norm.scale
+        (frame.rotation.transpose() * frame.translation).as_slice(),
+        frame.scale
     ));
 
     let write_trajectory = |path: PathBuf, times: &[f64], poses: Vec<Isometry3<f64>>| {
@@ -1050,16 +782,17 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         known_poses.clone(),
     )?;
 
-    let fit = Fit {
-        seq: &seq,
-        norm: &norm,
-        cfg: &exp.fit,
-        known_targets: known_poses.iter().map(|p| norm.to_field_frame(p)).collect(),
-        known_truth: &known_poses,
+    let fitting = Fitting {
+        data: FitData {
+            times: known_times,
+            poses: &known_poses,
+            imu: &seq.imu,
+        },
+        frame,
+        settings: exp.fit.settings(input.run.iterations(exp.fit.iterations)),
         held_times: &held_times,
         held_truth: &held_truth,
     };
-    let iterations = input.run.iterations(exp.fit.iterations);
     let mut modes = exp.fit.imu.clone();
     modes.dedup();
     // Units: the interpolation reference once (it uses no IMU), then every field per IMU mode.
@@ -1106,25 +839,23 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                     .context("an IMU mode of the config")?;
                 let section = config.section(&format!("fields.{name}"));
                 let mut field = build_pose_field(&section, &ctx)?;
-                let fitted = fit
-                    .run(field.as_mut(), mode, iterations, seed, unit)
+                let fitted = fitting
+                    .run(field.as_mut(), mode, seed, unit)
                     .with_context(|| format!("fitting [fields.{name}] with imu = {mode_key:?}"))?;
-                SavedPoseField::capture(&section, &ctx, norm.frame(), field.as_ref())?
+                SavedPoseField::capture(&section, &ctx, frame, field.as_ref())?
                     .write(&unit.file("field", "safetensors"))?;
-                let mut out = PoseBatch::default();
-                field.evaluate(&seq.times, Order::Pose, &mut out)?;
-                let all: Vec<Isometry3<f64>> = (0..seq.times.len())
-                    .map(|i| norm.to_world_frame(&out.world_from_body(i)))
+                let all: Vec<Isometry3<f64>> = fit::sample(field.as_ref(), &frame, &seq.times)?
+                    .iter()
+                    .map(|s| s.pose)
                     .collect();
                 let ang_vel = if imu_times.is_empty() {
                     None
                 } else {
-                    field.evaluate(&imu_times, Order::Velocity, &mut out)?;
-                    rms(seq
-                        .imu
+                    let samples = fit::sample(field.as_ref(), &frame, &imu_times)?;
+                    rms(samples
                         .iter()
-                        .enumerate()
-                        .map(|(i, s)| (out.ang_vel_body(i) - s.gyro).norm()))
+                        .zip(&seq.imu)
+                        .map(|(f, s)| (f.ang_vel_body - s.gyro).norm()))
                 };
                 (all, Some(field.num_params()), Some(fitted), ang_vel)
             };
@@ -1148,8 +879,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 ang_vel_rmse_rad_s,
                 held_out_poses: held_out.len(),
                 num_params,
-                final_loss: fitted.as_ref().map(|f| f.0),
-                fit: fitted.map(|f| f.1),
+                final_loss: fitted.map(|f| f.final_loss),
+                fit: fitted,
             })
         })?;
     Ok(())
@@ -1238,28 +969,17 @@ mod tests {
         let gyro: Vec<_> = seq.imu.iter().map(|s| s.gyro).collect();
         let accel: Vec<_> = seq.imu.iter().map(|s| s.accel).collect();
         let mut cot = PoseBatch::zeros(times.len(), Order::Acceleration);
-        assert!(losses::gyro_tight_l1(&out, &gyro, 1.0, &mut cot) < 1e-12);
-        assert!(losses::accel_l1(&out, &accel, &gravity_world(), 1.0, 1.0, &mut cot) < 1e-12);
+        assert!(fit::losses::gyro_tight_l1(&out, &gyro, 1.0, &mut cot) < 1e-12);
+        assert!(fit::losses::accel_l1(&out, &accel, &gravity_world(), 1.0, 1.0, &mut cot) < 1e-12);
         // Hand-held motion adds a few m/s² to gravity's 9.81.
         let mean_norm = accel.iter().map(|a| a.norm()).sum::<f64>() / accel.len() as f64;
         assert!((mean_norm - 9.81).abs() < 2.0, "{mean_norm}");
     }
 
     #[test]
-    fn normalisation_round_trips_and_interpolation_hits_known_poses() {
+    fn interpolation_hits_known_poses() {
         let (config, data) = synthetic(10);
         let seq = Sequence::new(&config, &data, 0).unwrap();
-        let known: Vec<_> = seq.known.iter().map(|&i| seq.poses[i]).collect();
-        let norm = Normalisation::fit(&known);
-        for pose in &known {
-            // Known positions land inside [-1/1.5, 1/1.5], well within PoseNet's tanh range.
-            assert!(norm.to_field_frame(pose).translation.vector.amax() <= 1.0 / 1.5 + 1e-12);
-        }
-        for pose in &seq.poses {
-            let back = norm.to_world_frame(&norm.to_field_frame(pose));
-            assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
-            assert!(back.rotation.angle_to(&pose.rotation) < 1e-12);
-        }
         for (&i, &t) in seq.known.iter().zip(&seq.known_times) {
             let (pose, _) = interpolate(&seq, t);
             assert!((pose.translation.vector - seq.poses[i].translation.vector).norm() < 1e-12);

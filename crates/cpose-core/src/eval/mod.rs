@@ -224,6 +224,23 @@ pub struct AteReport {
 /// association by nearest timestamp ([`associate`]`(gt, est, max_diff_secs)`), Umeyama alignment
 /// of the associated estimated positions onto the GT positions ([`umeyama`]) applied to the
 /// estimate, then [`error_stats`] of [`ape_translation`].
+///
+/// ```
+/// use cpose_core::eval::{Alignment, Trajectory, ate};
+/// use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+///
+/// let times = vec![0.0, 0.1, 0.2, 0.3];
+/// let at = |x: f64, y: f64| Isometry3::from_parts(Translation3::new(x, y, 0.0), UnitQuaternion::identity());
+/// let gt = Trajectory::new(times.clone(), vec![at(0.0, 0.0), at(1.0, 0.0), at(1.0, 1.0), at(2.0, 1.0)])?;
+/// // The estimate is the same path, 5 m ahead and 1 cm to the side.
+/// let est = Trajectory::new(times, vec![at(5.0, 0.01), at(6.0, 0.01), at(6.0, 1.01), at(7.0, 1.01)])?;
+/// let raw = ate(&gt, &est, Alignment::None, 0.01)?;
+/// assert!((raw.rmse_m - (25.0f64 + 1e-4).sqrt()).abs() < 1e-9);
+/// // After SE(3) alignment (evo's `-a`), nothing is left.
+/// let aligned = ate(&gt, &est, Alignment::Se3, 0.01)?;
+/// assert!(aligned.rmse_m < 1e-9 && aligned.num_matched == 4);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn ate(
     gt: &Trajectory,
     est: &Trajectory,
@@ -289,6 +306,23 @@ pub struct RpeReport {
 /// max_diff_secs` (`-r trans_part` and `-r angle_deg`): association ([`associate`]), the
 /// alignment (RPE is invariant to a rigid change of frame, not to Sim(3)'s scale), then
 /// [`rpe_with`].
+///
+/// ```
+/// use cpose_core::eval::{Alignment, RpeDelta, Trajectory, rpe_report};
+/// use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+///
+/// let times: Vec<f64> = (0..5).map(|i| 0.1 * i as f64).collect();
+/// let step = |i: usize, len: f64| {
+///     Isometry3::from_parts(Translation3::new(len * i as f64, 0.0, 0.0), UnitQuaternion::identity())
+/// };
+/// let gt = Trajectory::new(times.clone(), (0..5).map(|i| step(i, 1.0)).collect())?;
+/// // Every step of the estimate is 2 cm too long.
+/// let est = Trajectory::new(times, (0..5).map(|i| step(i, 1.02)).collect())?;
+/// let report = rpe_report(&gt, &est, 0.01, RpeDelta::Frames(1), Alignment::None)?;
+/// assert_eq!(report.num_pairs, 4);
+/// assert!((report.trans_rmse_m - 0.02).abs() < 1e-12 && report.rot_max_deg < 1e-9);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn rpe_report(
     gt: &Trajectory,
     est: &Trajectory,

@@ -1,6 +1,6 @@
-//! IMU measurements in the body frame.
+//! IMU readings in the body frame, and how they supervise a fit.
 
-use cpose_core::Order;
+use crate::Order;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -12,7 +12,7 @@ pub struct ImuSample {
     /// Angular velocity of the body in the body frame, rad/s (`ω_body`, `Ṙ = R[ω]×`).
     pub gyro: Vector3<f64>,
     /// Specific force in the body frame, m/s²: `f = Rᵀ (p̈ − g_world)` (≈ +9.81 up at rest;
-    /// see `cpose_core::geometry::specific_force_body`).
+    /// see [`crate::geometry::specific_force_body`]).
     pub accel: Vector3<f64>,
 }
 

@@ -58,7 +58,7 @@ impl<S: Real> Composed<S> {
             ra.start_secs.max(rb.start_secs),
             ra.end_secs.min(rb.end_secs),
         )
-        .ok_or_else(|| {
+        .map_err(|_| {
             PoseFieldError::Invalid(format!(
                 "composed pose field: time ranges {ra} and {rb} do not overlap"
             ))

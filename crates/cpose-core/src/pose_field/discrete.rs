@@ -22,7 +22,7 @@ const LOCAL: usize = 2 * PER_FRAME;
 ///
 /// `Exp(ξ_i) = (exp(ω_i), V(ω_i)·v_i)`, `V(ω) = I + (1 − cos θ)/θ² [ω]× + (θ − sin θ)/θ³ [ω]×²`,
 ///
-/// (BARF `camera.py`, algorithms.md §2.3; refinement `P_i = Exp(δξ_i) ∘ P⁰_i` is the
+/// (BARF `camera.py`, docs/methods.md §2.2; refinement `P_i = Exp(δξ_i) ∘ P⁰_i` is the
 /// composition of this field with the initial poses).
 ///
 /// **Between frames** (`t_i ≤ t ≤ t_{i+1}`, `u = (t − t_i)/(t_{i+1} − t_i)`) the *tangent* is
@@ -65,9 +65,7 @@ impl<S: Real> DiscretePoses<S> {
         }
         let first = frame_times_secs[0];
         let last = frame_times_secs[frame_times_secs.len() - 1];
-        let range = TimeRange::new(first, last).ok_or_else(|| {
-            PoseFieldError::Invalid(format!("invalid frame time range [{first}, {last}]"))
-        })?;
+        let range = TimeRange::new(first, last)?;
         Ok(Self {
             frame_times_secs: frame_times_secs.to_vec(),
             range,

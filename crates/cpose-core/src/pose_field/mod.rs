@@ -269,6 +269,23 @@ pub fn check_times(range: &TimeRange, times_secs: &[f64]) -> Result<(), PoseFiel
 /// - `rotation_rate = dq/dt`, `rotation_acc = d²q/dt²`, `lin_vel_world = dp/dt`,
 ///   `lin_acc_world = d²p/dt²` exactly (not by finite differences);
 /// - [`PoseField::backward`] accumulates `Σ_outputs ⟨cotangent, ∂output/∂θ⟩` into the gradient.
+///
+/// ```
+/// use cpose_core::{Order, PoseBatch, PoseField, SinusoidMotion, TimeRange};
+///
+/// let range = TimeRange::new(0.0, 10.0).expect("start < end");
+/// let field = SinusoidMotion::<f64>::handheld(range, 0);
+/// let mut out = PoseBatch::default();
+/// // Poses and their exact first and second time derivatives, in one batched call.
+/// field.evaluate(&[1.0, 2.5], Order::Acceleration, &mut out)?;
+/// let pose = out.world_from_body(1); // nalgebra Isometry3, world_from_body at 2.5 s
+/// let omega = out.ang_vel_body(1); // rad/s, body frame
+/// assert!((out.rotation[1].norm() - 1.0).abs() < 1e-12 && omega.norm().is_finite());
+/// # let _ = pose;
+/// // Outside its time range a field refuses to extrapolate.
+/// assert!(field.evaluate(&[11.0], Order::Pose, &mut out).is_err());
+/// # Ok::<(), cpose_core::PoseFieldError>(())
+/// ```
 pub trait PoseField<S: Real = f32>: Send + Sync {
     /// Times (seconds since the sequence origin) at which the field may be evaluated.
     fn time_range(&self) -> TimeRange;

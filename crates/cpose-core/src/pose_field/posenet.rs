@@ -1,4 +1,4 @@
-//! PoseNet (paper §3.1; the authors' `PoseNet.py`, algorithms.md §1.2): a camera trajectory as
+//! PoseNet (paper §3.1; the authors' `PoseNet.py`, docs/methods.md §1.1): a camera trajectory as
 //! two small MLPs of normalised time.
 //!
 //! `t_n = w · (2(t − t_min)/(t_max − t_min) − 1)` with `w` = `time_span` (1 in the paper),
@@ -202,6 +202,26 @@ impl PoseNetConfig {
 }
 
 /// The paper's continuous pose network; see the [module docs](self).
+///
+/// ```
+/// use cpose_core::pose_field::posenet::bands_for_spacing;
+/// use cpose_core::{Order, PoseBatch, PoseField, PoseNetConfig, TimeRange};
+///
+/// // Poses every 0.2 s over 4 s: the rule picks the bands, the rest are the paper's defaults.
+/// let range = TimeRange::new(0.0, 4.0).expect("start < end");
+/// let bands = bands_for_spacing(range, 0.2, 1.0);
+/// let config = PoseNetConfig { bands, ..PoseNetConfig::default() };
+/// let field = config.init::<f32>(range)?;
+/// assert_eq!(bands, 3);
+/// // Freshly initialised, it is the identity everywhere, with exact derivatives.
+/// let mut out = PoseBatch::default();
+/// field.evaluate(&[0.0, 1.7, 4.0], Order::Velocity, &mut out)?;
+/// assert!(out.world_from_body(1).translation.vector.norm() < 1e-4);
+/// assert!(out.ang_vel_body(1).norm() < 1e-3);
+/// // Its parameters, for an optimiser: translation network first, then rotation.
+/// assert_eq!(field.networks().len(), 2);
+/// # Ok::<(), cpose_core::PoseFieldError>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct PoseNet<S: Real = f32> {
     config: PoseNetConfig,
