@@ -185,6 +185,18 @@ impl BarfSim3 {
         )
     }
 
+    /// The same map as a [`Sim3`]: `Sim3::transform_pose` equals [`BarfSim3::align_pose`]
+    /// (scale `s0/s1`, rotation `R`, translation `t0 − (s0/s1)·R·t1`).
+    pub fn to_sim3(&self) -> Sim3 {
+        let rotation = Rotation3::from_matrix_unchecked(self.rotation);
+        let scale = self.s0 / self.s1;
+        Sim3 {
+            rotation,
+            translation: self.t0 - scale * (rotation * self.t1),
+            scale,
+        }
+    }
+
     /// A GT pose `world_from_cam` mapped into the learned (predicted) frame, the inverse of
     /// [`BarfSim3::align_pose`] (BARF `evaluate_full` for test poses, docs/methods.md §2.3):
     /// `c' = s1·Rᵀ·(c_gt − t0)/s0 + t1`, rotation `Rᵀ·R_gt` (w2c: `R_gt_w2c·R`).
@@ -479,6 +491,13 @@ mod tests {
         assert!(errors.rot_err_relative_deg < 1e-9);
         assert!(errors.trans_err < 1e-12, "{}", errors.trans_err);
         assert!((errors.alignment.s0 / errors.alignment.s1 - 1.0 / 0.3).abs() < 1e-12);
+        // The alignment as a similarity maps poses as it does.
+        let sim3 = errors.alignment.to_sim3();
+        for p in &pred {
+            let (a, b) = (errors.alignment.align_pose(p), sim3.transform_pose(p));
+            assert!((a.translation.vector - b.translation.vector).norm() < 1e-12);
+            assert!(a.rotation.angle_to(&b.rotation) < 1e-12);
+        }
         // Round trip through the learned frame (docs/methods.md §2.3).
         for (g, p) in gt.iter().zip(&pred) {
             let back = errors.alignment.gt_to_learned(g);

@@ -246,6 +246,8 @@ impl SavedPoseField {
         let mut field = build_pose_field(&config.section("field"), &self.context)?;
         params_from_slice(field.as_mut(), &self.params)
             .with_context(|| format!("{}: the field its config builds", path.display()))?;
+        // A saved field was trained to the end of its coarse-to-fine schedules.
+        field.set_progress(1.0);
         Ok(LoadedPoseField {
             field,
             frame: self.frame,

@@ -43,7 +43,9 @@
 //!
 //! Outputs: `metrics.json`
 //! (`{condition: {method: {rot_err_deg, rot_err_relative_deg, trans_err_su, psnr_db, ssim, …}}}`),
-//! `traj_<condition>_<method>.txt` (estimated, aligned to the truth), `traj_gt.txt`,
+//! `traj_<condition>_<method>.txt` (estimated, aligned to the truth) and, for the methods that
+//! learn a correction, `field_<condition>_<method>.safetensors` (those cameras as one pose field,
+//! for `cpose query`), `traj_gt.txt`,
 //! `traj_init.txt` (TUM), `trajectory_<condition>_<method>.png` (true, initial and estimated
 //! training cameras in evo_traj's layout, [`cpose_core::plot::trajectory_comparison`]),
 //! `view_<k>_<condition>_<method>.png` (rendered | truth), `depth_<k>_<condition>_<method>.png`,
@@ -57,9 +59,10 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
+use cpose_core::eval::{ReflectionFix, Sim3, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::plot;
+use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{Config, FieldContext, PoseField, PoseNetConfig, RunConfig, TimeRange};
@@ -268,13 +271,14 @@ fn decay(lr: [f64; 2], iterations: usize) -> ExponentialDecay {
     }
 }
 
+/// The pose correction of `method` (none for fixed poses), and its table as the pose-field
+/// registry reads it (`kind` and its settings), for the saved field.
 fn correction(
     method: Method,
     posenet: Option<&PoseNetConfig>,
     views: &Views,
     train: &TrainConfig,
-    seed: u64,
-) -> anyhow::Result<Option<Box<dyn PoseField>>> {
+) -> anyhow::Result<Option<(Box<dyn PoseField>, String)>> {
     let times = &views.train_times;
     let range = TimeRange::new(times[0], times[times.len() - 1])
         .context("need at least two training frames at distinct times")?;
@@ -282,9 +286,13 @@ fn correction(
         Method::TruePoses | Method::Fixed => None,
         Method::Posenet => {
             let config = posenet.context("[posenet] is decoded when PoseNet runs")?;
-            Some(Box::new(config.init::<f32>(range)?))
+            let table = format!("kind = \"posenet\"\n{}", toml::to_string(config)?);
+            Some((Box::new(config.init::<f32>(range)?), table))
         }
-        Method::Barf => Some(Box::new(cpose_core::DiscretePoses::<f32>::new(times)?)),
+        Method::Barf => Some((
+            Box::new(cpose_core::DiscretePoses::<f32>::new(times)?),
+            "kind = \"discrete\"\n".to_owned(),
+        )),
         Method::Spline => {
             let span = times.len() as f64 / train.spline_frames_per_control.max(1e-9);
             let config = cpose_core::SplineConfig {
@@ -292,16 +300,38 @@ fn correction(
                 control_points: (span.round() as usize).max(4),
                 knot_spacing_secs: None,
             };
-            let ctx = FieldContext {
-                time_range: range,
-                frame_times_secs: times.clone(),
-                seed,
-            };
-            Some(Box::new(
-                config.init::<f32>(ctx.time_range, &ctx.frame_times_secs)?,
-            ))
+            let table = format!(
+                "kind = \"lie_spline\"\ncontrol_points = {}\n",
+                config.control_points
+            );
+            Some((Box::new(config.init::<f32>(range, times)?), table))
         }
     })
+}
+
+/// Saves the cameras `C(t) ∘ init(t)` of a trained correction as one pose field, in the frame
+/// of `traj_<condition>_<method>.txt` (`frame`, the Procrustes alignment to the truth): a
+/// `composed` field of the correction (`table`) and the initial poses as a `discrete` field (exact
+/// at the frame times up to its `f32` parameters, about 1e-4 of the scene's size; between them,
+/// their se(3) tangents are interpolated).
+fn save_field(unit: &Unit, poses: &FramePoses, table: &str, frame: Sim3) -> anyhow::Result<()> {
+    let times = poses.times();
+    let init = cpose_core::DiscretePoses::<f32>::from_poses(times, poses.initial())?;
+    let mut params = poses.params();
+    params.extend(cpose_core::pose_field::params_to_vec(&init));
+    let saved = SavedPoseField {
+        config: format!(
+            "[field]\nkind = \"composed\"\n[field.a]\n{table}[field.b]\nkind = \"discrete\"\n"
+        ),
+        context: FieldContext {
+            time_range: TimeRange::new(times[0], times[times.len() - 1])?,
+            frame_times_secs: times.to_vec(),
+            seed: 0,
+        },
+        frame,
+        params,
+    };
+    saved.write(&unit.file("field", "safetensors"))
 }
 
 /// The whole config, decoded and checked: every table, before any data is read.
@@ -478,12 +508,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 warmup,
                 rotation_warmup,
             };
-            let mut poses = FramePoses::new(
-                init,
-                views.train_times.clone(),
-                correction(method, posenet.as_ref(), &views, train, seed)?,
-                schedules,
-            );
+            let (correction, table) = correction(method, posenet.as_ref(), &views, train)?.unzip();
+            let mut poses = FramePoses::new(init, views.train_times.clone(), correction, schedules);
             let schedule = Schedule {
                 iterations: iterations as u64,
                 rays_per_step: train.rays_per_step,
@@ -513,6 +539,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 &views,
                 field.as_mut(),
                 &poses,
+                table.as_deref(),
                 final_loss,
                 iterations,
                 seed,
@@ -635,6 +662,7 @@ fn evaluate(
     views: &Views,
     field: &mut dyn RadianceField,
     poses: &FramePoses,
+    correction_table: Option<&str>,
     final_loss: f64,
     iterations: usize,
     seed: u64,
@@ -668,6 +696,9 @@ fn evaluate(
         None => Vec::new(),
     };
     write_trajectory(unit.file("traj", "txt"), &views.train_times, &aligned)?;
+    if let Some(table) = correction_table {
+        save_field(unit, poses, table, errors.alignment.to_sim3())?;
+    }
     let key = unit.key();
     let title = format!(
         "nerf {}: {} cameras, Procrustes-aligned to the truth; rotation error {:.2}°",
