@@ -1779,7 +1779,7 @@ fn task_configs() {
             code: 2,
             expect: &[
                 "trajectory_fit.toml",
-                "[fit] loose_window_secs = -1 must be a positive number of seconds",
+                "[fit] loose_window_secs = -1 must be a positive number",
             ],
         },
         Case {
@@ -1895,6 +1895,27 @@ fn task_configs() {
             args: &["run", NERF, "--set", "train.rays_per_step=0"],
             code: 2,
             expect: &["[train] rays_per_step = 0: expected at least 1"],
+        },
+        Case {
+            name: "nerf: a NaN rate of a method that does not run",
+            files: &[],
+            args: &["run", NERF, "--set", "train.lr_pose=[nan, 1e-5]"],
+            code: 2,
+            expect: &["[train] lr_pose = [NaN, 0.00001]: expected a start rate above 0"],
+        },
+        Case {
+            name: "nerf: an infinite field rate",
+            files: &[],
+            args: &["run", NERF, "--set", "train.lr_field.grid=[1e-2, inf]"],
+            code: 2,
+            expect: &["[train] lr_field.grid = [0.01, inf]: expected a start rate above 0"],
+        },
+        Case {
+            name: "events: a negative PoseNet rate",
+            files: &[],
+            args: &["run", EVENTS, "--set", "train.posenet_lr_rotation=[-1, 1e-5]"],
+            code: 2,
+            expect: &["[train] posenet_lr_rotation = [-1, 0.00001]: expected a start rate above 0"],
         },
         Case {
             name: "nerf: fov_x_deg = 180",
@@ -2237,6 +2258,20 @@ fn task_configs() {
             ],
             code: 2,
             expect: &["[synthetic]: width = 1000000 must lie in 16..=4096"],
+        },
+        Case {
+            name: "slam: tracking.lr = nan",
+            files: &[],
+            args: &[
+                "run",
+                ROOM,
+                "--set",
+                "data.path=\"room\"",
+                "--set",
+                "tracking.lr=nan",
+            ],
+            code: 2,
+            expect: &["[tracking] lr = NaN must be a positive number"],
         },
         Case {
             name: "slam: one frame",

@@ -585,6 +585,14 @@ impl Settings {
         if !(threshold > 0.0 && train.eps > 0.0) {
             bail!("[train]: need threshold > 0 and eps > 0");
         }
+        ExponentialDecay::check_train_rates(
+            &[
+                ("posenet_lr_translation", train.posenet_lr_translation),
+                ("posenet_lr_rotation", train.posenet_lr_rotation),
+            ],
+            &train.lr_field,
+        )
+        .map_err(anyhow::Error::msg)?;
         let iterations = run.iterations(train.iterations);
         PoseTiming {
             hold: train.pose_hold,

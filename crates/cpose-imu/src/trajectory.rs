@@ -685,15 +685,6 @@ impl Settings {
         exp.fit
             .validate()
             .map_err(|e| anyhow::anyhow!("{}: [fit] {e}", config.path().display()))?;
-        if exp.fit.imu.contains(&ImuMode::Loose)
-            && !(exp.fit.loose_window_secs > 0.0 && exp.fit.loose_window_secs.is_finite())
-        {
-            bail!(
-                "{}: [fit] loose_window_secs = {} must be a positive number of seconds",
-                config.path().display(),
-                exp.fit.loose_window_secs
-            );
-        }
         if exp.fields.is_empty() {
             bail!(
                 "{}: no pose fields to fit; add a table such as [fields.posenet] with kind = \"posenet\"",

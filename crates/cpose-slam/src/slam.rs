@@ -40,6 +40,27 @@ pub struct TrackingConfig {
     pub lost_depth_error: f64,
 }
 
+impl TrackingConfig {
+    /// Checks the values; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("lr", self.lr),
+            ("rotation_lr_factor", self.rotation_lr_factor),
+            ("lost_translation", self.lost_translation),
+            ("lost_depth_error", self.lost_depth_error),
+        ];
+        for (key, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("{key} = {value} must be a positive number"));
+            }
+        }
+        if self.pixels == 0 {
+            return Err("pixels = 0 must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
 impl Default for TrackingConfig {
     fn default() -> Self {
         Self {

@@ -536,6 +536,10 @@ impl SlamSetup {
         bounds: &BoundsConfig,
         mesh: &MeshConfig,
     ) -> anyhow::Result<Self> {
+        tracking
+            .validate()
+            .map_err(|e| anyhow::anyhow!("[tracking] {e}"))?;
+        map.validate().map_err(|e| anyhow::anyhow!("[map] {e}"))?;
         for steps in [
             &mut tracking.iterations,
             &mut mapping.iterations,

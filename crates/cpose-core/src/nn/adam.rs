@@ -133,6 +133,38 @@ pub struct ExponentialDecay {
 }
 
 impl ExponentialDecay {
+    /// Checks a config's `[start, end]` rates: `start` finite and above 0, `end` finite and
+    /// at least 0. The message names `key`.
+    pub fn check_rates(key: &str, [start, end]: [f64; 2]) -> Result<(), String> {
+        if start.is_finite() && start > 0.0 && end.is_finite() && end >= 0.0 {
+            Ok(())
+        } else {
+            Err(format!(
+                "{key} = [{start}, {end}]: expected a start rate above 0 and an end rate of at \
+                 least 0, both finite"
+            ))
+        }
+    }
+
+    /// [`ExponentialDecay::check_rates`] of every named pair, then of every `lr_field.<group>`
+    /// pair of `field_groups`; the message says `[train]`.
+    pub fn check_train_rates<'a>(
+        named: &[(&str, [f64; 2])],
+        field_groups: impl IntoIterator<Item = (&'a String, &'a [f64; 2])>,
+    ) -> Result<(), String> {
+        let groups = field_groups
+            .into_iter()
+            .map(|(k, v)| (format!("lr_field.{k}"), *v));
+        for (key, value) in named
+            .iter()
+            .map(|(k, v)| ((*k).to_owned(), *v))
+            .chain(groups)
+        {
+            Self::check_rates(&key, value).map_err(|e| format!("[train] {e}"))?;
+        }
+        Ok(())
+    }
+
     /// The learning rate at iteration `it`.
     pub fn lr(&self, it: u64) -> f64 {
         self.lr0 * (self.lr_end / self.lr0).powf(it as f64 / self.max_iter.max(1) as f64)

@@ -367,6 +367,15 @@ impl Settings {
         if train.rays_per_step == 0 {
             bail!("[train] rays_per_step = 0: expected at least 1");
         }
+        ExponentialDecay::check_train_rates(
+            &[
+                ("posenet_lr_translation", train.posenet_lr_translation),
+                ("posenet_lr_rotation", train.posenet_lr_rotation),
+                ("lr_pose", train.lr_pose),
+            ],
+            &train.lr_field,
+        )
+        .map_err(anyhow::Error::msg)?;
         if !(0.0..=1.0).contains(&train.field_restart_until) {
             bail!(
                 "[train] field_restart_until = {} must lie in [0, 1] (a fraction of the steps)",
