@@ -1913,7 +1913,12 @@ fn task_configs() {
         Case {
             name: "events: a negative PoseNet rate",
             files: &[],
-            args: &["run", EVENTS, "--set", "train.posenet_lr_rotation=[-1, 1e-5]"],
+            args: &[
+                "run",
+                EVENTS,
+                "--set",
+                "train.posenet_lr_rotation=[-1, 1e-5]",
+            ],
             code: 2,
             expect: &["[train] posenet_lr_rotation = [-1, 0.00001]: expected a start rate above 0"],
         },

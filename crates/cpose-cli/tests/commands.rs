@@ -1274,6 +1274,40 @@ fn events_reads_an_eventnerf_folder() {
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
 }
 
+/// `cpose query FIELD --times …` at the times of `traj` (a run's trajectory file) gives `traj`
+/// within `tolerance` (metres or scene units, and radians).
+fn assert_query_reproduces(dir: &Path, field: &Path, traj: &Path, tolerance: (f64, f64)) {
+    let traj = eval::read_tum(traj).expect("the run's trajectory file");
+    let times: Vec<String> = traj
+        .timestamps_secs()
+        .iter()
+        .map(|t| format!("{t}"))
+        .collect();
+    let out = cpose_in(
+        dir,
+        &[
+            "query",
+            field.to_str().expect("a UTF-8 path"),
+            "--times",
+            &times.join(","),
+        ],
+    );
+    let what = field.display();
+    assert!(
+        out.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).expect("query prints text");
+    let queried = eval::parse_tum(&text, Path::new("query")).expect("query prints TUM");
+    assert_eq!(queried.len(), traj.len(), "{what}");
+    for (a, b) in queried.poses().iter().zip(traj.poses()) {
+        let moved = (a.translation.vector - b.translation.vector).norm();
+        assert!(moved < tolerance.0, "{what}: {moved}");
+        assert!(a.rotation.angle_to(&b.rotation) < tolerance.1, "{what}");
+    }
+}
+
 /// `nerf` saves the cameras of every method that learns a correction, `C(t) ∘ init(t)` in the
 /// frame of its aligned trajectory: `cpose query` at the frame times gives that trajectory.
 #[test]
@@ -1310,38 +1344,15 @@ fn nerf_saves_its_cameras_and_query_reproduces_them() {
         String::from_utf8_lossy(&out.stderr)
     );
     let run = dir.join("run");
+    // Parameters are f32: the initial poses' tangents keep about 1e-4 of the orbit's radius of
+    // 4.5 (measured: at most 2.1e-4 for PoseNet, 1.2e-5 rad in rotation).
     for method in ["posenet", "barf", "spline"] {
-        let traj = eval::read_tum(run.join(format!("traj_synthetic_{method}.txt"))).unwrap();
-        let times: Vec<String> = traj
-            .timestamps_secs()
-            .iter()
-            .map(|t| format!("{t}"))
-            .collect();
-        let field = run.join(format!("field_synthetic_{method}.safetensors"));
-        let out = cpose_in(
+        assert_query_reproduces(
             &dir,
-            &[
-                "query",
-                field.to_str().unwrap(),
-                "--times",
-                &times.join(","),
-            ],
+            &run.join(format!("field_synthetic_{method}.safetensors")),
+            &run.join(format!("traj_synthetic_{method}.txt")),
+            (1e-3, 1e-4),
         );
-        assert!(
-            out.status.success(),
-            "{method}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let queried =
-            eval::parse_tum(&String::from_utf8(out.stdout).unwrap(), Path::new("query")).unwrap();
-        assert_eq!(queried.len(), traj.len(), "{method}");
-        for (a, b) in queried.poses().iter().zip(traj.poses()) {
-            let moved = (a.translation.vector - b.translation.vector).norm();
-            // Parameters are f32: the initial poses' tangents keep about 1e-4 of the orbit's
-            // radius of 4.5 (measured: at most 2.1e-4 for PoseNet, 1.2e-5 rad in rotation).
-            assert!(moved < 1e-3, "{method}: {moved}");
-            assert!(a.rotation.angle_to(&b.rotation) < 1e-4, "{method}");
-        }
     }
     assert!(!run.join("field_synthetic_true_poses.safetensors").exists());
 }
@@ -1370,39 +1381,14 @@ fn a_fitted_field_is_saved_and_query_reproduces_its_trajectory() {
         String::from_utf8_lossy(&out.stderr)
     );
     let run = dir.join("run");
+    // The run's trajectories, again from the saved fields at their own times.
     for method in ["posenet", "spline", "lie_spline"] {
-        let field = run.join(format!("field_none_{method}.safetensors"));
-        let traj = eval::read_tum(run.join(format!("traj_none_{method}.txt"))).unwrap();
-        // The run's trajectory, again from the saved field at its own times.
-        let times: Vec<String> = traj
-            .timestamps_secs()
-            .iter()
-            .map(|t| format!("{t}"))
-            .collect();
-        let out = cpose_in(
+        assert_query_reproduces(
             &dir,
-            &[
-                "query",
-                field.to_str().unwrap(),
-                "--times",
-                &times.join(","),
-            ],
+            &run.join(format!("field_none_{method}.safetensors")),
+            &run.join(format!("traj_none_{method}.txt")),
+            (1e-6, 1e-6),
         );
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let queried =
-            eval::parse_tum(&String::from_utf8(out.stdout).unwrap(), Path::new("query")).unwrap();
-        assert_eq!(queried.len(), traj.len(), "{method}");
-        for (a, b) in queried.poses().iter().zip(traj.poses()) {
-            assert!(
-                (a.translation.vector - b.translation.vector).norm() < 1e-6,
-                "{method}"
-            );
-            assert!(a.rotation.angle_to(&b.rotation) < 1e-6, "{method}");
-        }
     }
     let field = run.join("field_none_posenet.safetensors");
     let field = field.to_str().unwrap();

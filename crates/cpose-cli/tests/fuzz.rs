@@ -234,3 +234,71 @@ fn config_checks_never_panic() {
         });
     }
 }
+
+#[test]
+fn colmap_readers_never_panic() {
+    use cpose_nerf::data::colmap::{
+        CameraModel, ColmapCamera, ColmapFormat, ColmapImage, ColmapModel, ColmapPoint,
+        read_colmap_model, write_colmap_model,
+    };
+    let pose = |x: f64| {
+        Isometry3::from_parts(
+            Translation3::new(x, 0.5, -1.0),
+            UnitQuaternion::from_euler_angles(0.1, 0.2 * x, -0.3),
+        )
+    };
+    let model = ColmapModel {
+        cameras: vec![
+            ColmapCamera {
+                id: 1,
+                model: CameraModel::SimpleRadial,
+                width: 64,
+                height: 48,
+                params: vec![50.0, 32.0, 24.0, 0.01],
+            },
+            ColmapCamera {
+                id: 2,
+                model: CameraModel::Pinhole,
+                width: 64,
+                height: 48,
+                params: vec![50.0, 51.0, 32.0, 24.0],
+            },
+        ],
+        images: Some(vec![
+            ColmapImage {
+                id: 1,
+                camera_id: 1,
+                name: "a.png".into(),
+                world_from_camera: pose(0.0),
+                points2d: vec![([10.0, 12.5], Some(7)), ([3.0, 4.0], None)],
+            },
+            ColmapImage {
+                id: 2,
+                camera_id: 2,
+                name: "b.png".into(),
+                world_from_camera: pose(1.0),
+                points2d: vec![([20.0, 2.5], Some(7))],
+            },
+        ]),
+        points: Some(vec![ColmapPoint {
+            id: 7,
+            xyz: [0.1, -0.2, 3.0],
+            rgb: [200, 100, 50],
+            error: 0.4,
+            track: vec![(1, 0), (2, 0)],
+        }]),
+    };
+    for (format, ext) in [(ColmapFormat::Binary, "bin"), (ColmapFormat::Text, "txt")] {
+        let dir = temp_dir(&format!("fuzz-colmap-{ext}"));
+        write_colmap_model(&dir, &model, format, false).unwrap();
+        for part in ["cameras", "images", "points3D"] {
+            let file = dir.join(format!("{part}.{ext}"));
+            let valid = std::fs::read(&file).unwrap();
+            fuzz(&format!("colmap_{part}_{ext}"), &valid, |b| {
+                std::fs::write(&file, b).unwrap();
+                let _ = read_colmap_model(&dir);
+            });
+            std::fs::write(&file, &valid).unwrap();
+        }
+    }
+}

@@ -29,6 +29,15 @@ pub enum DataError {
         /// What it found.
         found: String,
     },
+    /// A data file could not be written, replaced or removed (a COLMAP model,
+    /// [`crate::data::colmap::write_colmap_model`]).
+    #[error("cannot write {}: {error}", .path.display())]
+    Write {
+        /// The file or folder.
+        path: PathBuf,
+        /// The underlying error.
+        error: io::Error,
+    },
     /// An image file could not be read (missing, a folder, no permission …).
     #[error("cannot read image {} (expected a readable PNG or JPEG file): {error}", .path.display())]
     ImageRead {

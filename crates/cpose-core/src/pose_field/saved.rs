@@ -28,7 +28,7 @@ use crate::config::{Config, Section};
 use crate::eval::Sim3;
 use crate::fs::write_atomic;
 use crate::registry::{FieldContext, build_pose_field};
-use crate::{Order, PoseBatch, PoseField, TimeRange};
+use crate::{PoseField, TimeRange};
 
 use super::{params_from_slice, params_to_vec};
 
@@ -258,17 +258,7 @@ impl SavedPoseField {
 impl LoadedPoseField {
     /// Poses and velocities in the world at `times_secs` (each inside the field's range).
     pub fn sample(&self, times_secs: &[f64]) -> anyhow::Result<Vec<FieldSample>> {
-        let mut out = PoseBatch::default();
-        self.field.evaluate(times_secs, Order::Velocity, &mut out)?;
-        let f = &self.frame;
-        Ok((0..times_secs.len())
-            .map(|i| FieldSample {
-                t_secs: times_secs[i],
-                pose: f.transform_pose(&out.world_from_body(i)),
-                ang_vel_body: out.ang_vel_body(i),
-                lin_vel_world: f.scale * (f.rotation * out.lin_vel_world[i]),
-            })
-            .collect())
+        crate::fit::sample(self.field.as_ref(), &self.frame, times_secs)
     }
 }
 
@@ -277,6 +267,7 @@ mod tests {
     use super::*;
     use crate::pose_field::builtin::tests::ctx as context;
     use crate::testing::TempDir;
+    use crate::{Order, PoseBatch};
 
     const FIELDS: &str = r#"
 task = "none"

@@ -1,6 +1,7 @@
 //! Real multi-view datasets for the `nerf` task: LLFF forward-facing scenes ([`llff`]) and the
 //! Blender / NeRF-synthetic format ([`blender`]), loaded into one small [`Dataset`] type; NumPy
-//! `.npy` arrays ([`npy`]) for them and for the event readers above this crate.
+//! `.npy` arrays ([`npy`]) for them and for the event readers above this crate; COLMAP sparse
+//! models ([`colmap`]: cameras, image poses and 3-D points), read and written.
 //!
 //! # Conventions (see CONVENTIONS.md)
 //!
@@ -20,6 +21,7 @@ use crate::camera::PinholeCamera;
 use crate::image::Image;
 
 pub mod blender;
+pub mod colmap;
 pub mod llff;
 pub mod npy;
 
