@@ -1115,6 +1115,12 @@ mod tests {
         let last = bytes.len() - 1;
         bytes[last] ^= 1;
         std::fs::write(&ckpt, bytes).unwrap();
+        // A checkpoint write killed half-way leaves its temporary file behind: never read.
+        std::fs::write(
+            cut.join("units/hard_b_s1/checkpoint.bin.tmp"),
+            b"cpose checkpoint v3\n\x07",
+        )
+        .unwrap();
         calls.store(0, Ordering::Relaxed);
         demo(&cut, true, None, &calls).unwrap();
         assert_eq!(
