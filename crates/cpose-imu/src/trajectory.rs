@@ -7,10 +7,9 @@
 //! field named in `[fields.NAME]` is fitted once per IMU mode; slerp/linear interpolation of the
 //! known poses is the reference (`interp`).
 //!
-//! Fields work in a normalised frame (rotated to the mean known orientation, centred and scaled
-//! so that PoseNet's tanh-bounded translation fits: `cpose_core::fit::normalising_frame`); errors are
-//! reported in
-//! degrees and metres of the original world.
+//! Every field is fitted by `cpose_core::fit` in its normalised frame (rotated to the mean known
+//! orientation, centred and scaled so that PoseNet's tanh-bounded translation fits); errors are
+//! reported in degrees and metres of the original world.
 //!
 //! Besides `traj_<imu>_<method>.txt`, every unit draws `trajectory_<imu>_<method>.png` (the
 //! estimate against the truth and the known poses, evo_traj's layout) and
