@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod bias;
 pub mod euroc;
 pub mod increment;
 pub mod losses;

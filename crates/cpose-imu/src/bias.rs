@@ -1,0 +1,203 @@
+//! The IMU's biases estimated from the recording itself: at rest the gyroscope reads its bias and
+//! the accelerometer gravity plus its bias, so a stationary start gives both without any ground
+//! truth (EuRoC's flights begin with the vehicle standing on the floor).
+//!
+//! The start is at rest while every window of [`WINDOW_SECS`] is as quiet as the sensor's white
+//! noise allows: each gyroscope axis's standard deviation within [`NOISE_MULTIPLE`] times
+//! `σ_g = gyro_noise_density · √rate`, the specific force's norm within that multiple of
+//! `σ_a = accel_noise_density · √rate` and its mean within [`GRAVITY_TOLERANCE`] of gravity, and
+//! the window's mean gyroscope reading within that multiple of its standard error from the first
+//! window's (a steady turn is quiet too). The first window that is not — motors starting, a hand
+//! picking the camera up — ends the rest.
+//!
+//! Over the rest, the gyroscope bias is the mean reading. Of the accelerometer bias only the part
+//! along the measured specific force is observable without the orientation: `b_a = (|f̄| − g) f̄ /
+//! |f̄|` (the rest of it is indistinguishable from a tilt).
+
+use nalgebra::Vector3;
+
+use crate::euroc::{ImuNoise, RawImuSample};
+
+/// Length of the windows the rest test looks at, seconds.
+pub const WINDOW_SECS: f64 = 0.25;
+/// A window is at rest while its spread stays within this many white-noise standard deviations.
+pub const NOISE_MULTIPLE: f64 = 5.0;
+/// A window is at rest only if its mean specific force is this close to gravity, m/s².
+pub const GRAVITY_TOLERANCE: f64 = 0.5;
+
+/// The biases estimated over a stationary start.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RestBias {
+    /// Gyroscope bias in the IMU frame, rad/s.
+    pub gyro: Vector3<f64>,
+    /// The observable part of the accelerometer bias (along gravity), IMU frame, m/s².
+    pub accel: Vector3<f64>,
+    /// How long the start was at rest, seconds.
+    pub rest_secs: f64,
+    /// Readings averaged.
+    pub readings: usize,
+}
+
+/// The biases over the stationary start of `imu` (sorted by time), with the noise densities
+/// and rate of `noise` and gravity's magnitude `gravity_m_s2`; `None` unless at least the first
+/// window is at rest.
+pub fn bias_at_rest(imu: &[RawImuSample], noise: &ImuNoise, gravity_m_s2: f64) -> Option<RestBias> {
+    let origin = imu.first()?.stamp;
+    let sigma_g = noise.gyro_noise_density * noise.rate_hz.sqrt();
+    let sigma_a = noise.accel_noise_density * noise.rate_hz.sqrt();
+    // A window with fewer than half the readings its length should hold is a gap or the end.
+    let min_readings = ((0.5 * WINDOW_SECS * noise.rate_hz) as usize).max(2);
+    // Windows [k·W, (k+1)·W) from the first reading, while they are at rest and their mean
+    // gyroscope reading stays the first window's.
+    let (mut end, mut k, mut first_mean) = (0, 0, None);
+    loop {
+        let until = (k + 1) as f64 * WINDOW_SECS;
+        let len = imu[end..]
+            .iter()
+            .take_while(|s| s.stamp.secs_since(origin) < until)
+            .count();
+        let window = &imu[end..end + len];
+        if len < min_readings {
+            break;
+        }
+        let Some(mean) = quiet_mean(window, sigma_g, sigma_a, gravity_m_s2) else {
+            break;
+        };
+        // Two means of n readings differ by σ_g·√(2/n) (one standard deviation).
+        let tolerance = NOISE_MULTIPLE * sigma_g * (2.0 / len as f64).sqrt();
+        if (mean - *first_mean.get_or_insert(mean)).amax() > tolerance {
+            break;
+        }
+        end += len;
+        k += 1;
+    }
+    if end == 0 {
+        return None;
+    }
+    let rest = &imu[..end];
+    let n = rest.len() as f64;
+    let gyro = rest.iter().map(|s| s.gyro).sum::<Vector3<f64>>() / n;
+    let force = rest.iter().map(|s| s.accel).sum::<Vector3<f64>>() / n;
+    let norm = force.norm();
+    Some(RestBias {
+        gyro,
+        accel: force * ((norm - gravity_m_s2) / norm),
+        rest_secs: rest[end - 1].stamp.secs_since(origin) + 1.0 / noise.rate_hz,
+        readings: end,
+    })
+}
+
+/// The mean gyroscope reading of a window whose readings are as quiet as the white noise and
+/// read gravity; `None` for a window in motion.
+fn quiet_mean(
+    window: &[RawImuSample],
+    sigma_g: f64,
+    sigma_a: f64,
+    gravity: f64,
+) -> Option<Vector3<f64>> {
+    let n = window.len() as f64;
+    let mean = window.iter().map(|s| s.gyro).sum::<Vector3<f64>>() / n;
+    let var = window
+        .iter()
+        .map(|s| (s.gyro - mean).component_mul(&(s.gyro - mean)))
+        .sum::<Vector3<f64>>()
+        / n;
+    let norms: Vec<f64> = window.iter().map(|s| s.accel.norm()).collect();
+    let norm_mean = norms.iter().sum::<f64>() / n;
+    let norm_var = norms.iter().map(|a| (a - norm_mean).powi(2)).sum::<f64>() / n;
+    let limit_g = NOISE_MULTIPLE * sigma_g;
+    let quiet = var.iter().all(|v| v.sqrt() <= limit_g)
+        && norm_var.sqrt() <= NOISE_MULTIPLE * sigma_a
+        && (norm_mean - gravity).abs() <= GRAVITY_TOLERANCE;
+    quiet.then_some(mean)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cpose_core::Timestamp;
+    use cpose_core::geometry::GRAVITY_M_S2;
+    use cpose_core::random::standard_normal;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    const NOISE: ImuNoise = ImuNoise {
+        gyro_noise_density: 1.7e-4,
+        gyro_random_walk: 2e-5,
+        accel_noise_density: 2e-3,
+        accel_random_walk: 3e-3,
+        rate_hz: 200.0,
+    };
+
+    /// 1.5 s at rest, tilted, with biases and white noise, then a steady turn at 1 rad/s.
+    #[test]
+    fn a_simulated_rest_gives_the_biases_and_its_length() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (bg, ba) = (
+            Vector3::new(0.02, -0.01, 0.07),
+            Vector3::new(0.1, 0.05, -0.2),
+        );
+        let up = Vector3::new(0.3, -0.2, 1.0).normalize() * GRAVITY_M_S2;
+        let sigma = |density: f64| density * NOISE.rate_hz.sqrt();
+        let (sg, sa) = (
+            sigma(NOISE.gyro_noise_density),
+            sigma(NOISE.accel_noise_density),
+        );
+        let imu: Vec<RawImuSample> = (0..600)
+            .map(|k| {
+                let t = k as f64 / NOISE.rate_hz;
+                let turn = if t < 1.5 { 0.0 } else { 1.0 };
+                let mut noisy = |s: f64| s * Vector3::from_fn(|_, _| standard_normal(&mut rng));
+                RawImuSample {
+                    stamp: Timestamp::from_secs_f64(100.0 + t),
+                    gyro: Vector3::new(0.0, 0.0, turn) + bg + noisy(sg),
+                    accel: up + ba + noisy(sa),
+                }
+            })
+            .collect();
+        let rest = bias_at_rest(&imu, &NOISE, GRAVITY_M_S2).unwrap();
+        assert!((rest.rest_secs - 1.5).abs() < 1e-9, "{rest:?}");
+        assert_eq!(rest.readings, 300);
+        // The mean of 300 readings: σ_g / √300 ≈ 1.4e-4 rad/s per axis.
+        assert!((rest.gyro - bg).amax() < 6e-4, "{rest:?}");
+        let along = up.normalize();
+        assert!(
+            (rest.accel - ba.dot(&along) * along).norm() < 0.01,
+            "{rest:?}"
+        );
+        // Starting in motion (a turn that speeds up and slows down): no rest to estimate from.
+        // (A steady turn from the first reading on cannot be told from a bias by the readings.)
+        let moving: Vec<RawImuSample> = imu
+            .iter()
+            .map(|s| RawImuSample {
+                gyro: s.gyro + Vector3::new(0.0, 0.0, (3.0 * s.stamp.as_secs_f64()).sin()),
+                ..*s
+            })
+            .collect();
+        assert!(bias_at_rest(&moving, &NOISE, GRAVITY_M_S2).is_none());
+    }
+
+    /// EuRoC V1_02 begins on the floor: the gyroscope bias from its first fraction of a second
+    /// agrees with the ground truth's estimate to a few thousandths of a rad/s.
+    #[test]
+    fn the_euroc_excerpt_starts_at_rest_with_the_ground_truths_gyro_bias() {
+        let Some(dir) = cpose_core::fs::shared_data_dir()
+            .map(|d| d.join("euroc/V1_02_excerpt"))
+            .filter(|d| d.is_dir())
+        else {
+            eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
+            return;
+        };
+        let seq = crate::euroc::EurocSequence::load(&dir).unwrap();
+        let rest = bias_at_rest(&seq.imu, &seq.imu_noise, GRAVITY_M_S2).unwrap();
+        let truth = seq.ground_truth[0].gyro_bias;
+        let error = (rest.gyro - truth).norm();
+        eprintln!(
+            "EuRoC V1_02: at rest for {:.2} s ({} readings), gyro bias {:.4?} against the ground \
+             truth's {:.4?} ({error:.4} rad/s apart)",
+            rest.rest_secs, rest.readings, rest.gyro, truth
+        );
+        assert!(rest.rest_secs >= 0.25 && rest.rest_secs < 5.0, "{rest:?}");
+        assert!(error < 0.004, "{error}");
+    }
+}
