@@ -266,6 +266,7 @@ fn trajectory_resumes_after_kills_at_random_moments() {
             let mut child = Command::new(env!("CARGO_BIN_EXE_cpose"))
                 .current_dir(workspace_root())
                 .args(&args)
+                .stdout(std::process::Stdio::null())
                 .stderr(std::process::Stdio::null())
                 .spawn()
                 .expect("the cpose binary starts");
