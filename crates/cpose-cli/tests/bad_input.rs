@@ -2554,7 +2554,7 @@ fn task_configs() {
             code: 2,
             expect: &[
                 "synthetic_imu.toml: TOML parse error",
-                "unknown variant `magic`, expected `ground_truth` or `raw`",
+                "unknown variant `magic`, expected one of `estimate`, `ground_truth`, `raw`",
             ],
         },
         Case {
