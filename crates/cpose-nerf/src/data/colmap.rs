@@ -399,6 +399,31 @@ fn check_camera(cam: &ColmapCamera, path: &Path, at: &str) -> Result<(), DataErr
 }
 
 /// The error for a model id or name that is not supported.
+/// Checks the camera `(id, model, width, height, params)` read from either format and appends
+/// it, refusing a duplicate id. Out-of-range sizes saturate and are then rejected by
+/// [`check_camera`].
+fn accept_camera(
+    cameras: &mut Vec<ColmapCamera>,
+    ids: &mut HashSet<u32>,
+    (id, model, width, height, params): (u32, CameraModel, u64, u64, Vec<f64>),
+    path: &Path,
+    at: &str,
+) -> Result<(), DataError> {
+    let camera = ColmapCamera {
+        id,
+        model,
+        width: usize::try_from(width).unwrap_or(usize::MAX),
+        height: usize::try_from(height).unwrap_or(usize::MAX),
+        params,
+    };
+    check_camera(&camera, path, at)?;
+    if !ids.insert(id) {
+        return Err(duplicate(path, at, "camera", id));
+    }
+    cameras.push(camera);
+    Ok(())
+}
+
 fn unsupported_model(path: &Path, at: &str, found: String) -> DataError {
     format_err(
         path,
@@ -652,19 +677,8 @@ fn read_cameras_bin(path: &Path, bytes: &[u8]) -> Result<Vec<ColmapCamera>, Data
         for name in model.param_names() {
             params.push(r.f64(&|| format!("{at}: parameter {name}"))?);
         }
-        let camera = ColmapCamera {
-            id,
-            model,
-            // Out-of-range sizes saturate and are then rejected by `check_camera`.
-            width: usize::try_from(width).unwrap_or(usize::MAX),
-            height: usize::try_from(height).unwrap_or(usize::MAX),
-            params,
-        };
-        check_camera(&camera, path, &at)?;
-        if !ids.insert(id) {
-            return Err(duplicate(path, &at, "camera", id));
-        }
-        cameras.push(camera);
+        let camera = (id, model, width, height, params);
+        accept_camera(&mut cameras, &mut ids, camera, path, &at)?;
     }
     r.finish(n, "cameras")?;
     Ok(cameras)
@@ -909,18 +923,8 @@ fn read_cameras_txt(path: &Path, text: &str) -> Result<Vec<ColmapCamera>, DataEr
             params.push(f.f64(&format!("{} parameter {p}", model.name()))?);
         }
         f.end(&format!("the {} parameters", model.name()))?;
-        let camera = ColmapCamera {
-            id,
-            model,
-            width: usize::try_from(width).unwrap_or(usize::MAX),
-            height: usize::try_from(height).unwrap_or(usize::MAX),
-            params,
-        };
-        check_camera(&camera, path, &at)?;
-        if !ids.insert(id) {
-            return Err(duplicate(path, &at, "camera", id));
-        }
-        cameras.push(camera);
+        let camera = (id, model, width, height, params);
+        accept_camera(&mut cameras, &mut ids, camera, path, &at)?;
     }
     Ok(cameras)
 }
