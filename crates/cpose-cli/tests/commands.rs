@@ -591,12 +591,12 @@ fn every_config_runs_as_a_smoke_test() {
                 args.extend(["--set".into(), set.into()]);
             }
         }
-        if text.contains("task = \"slam\"")
-            && !text.contains("source = \"synthetic\"")
-            && !needs_data
-        {
-            // Real RGB-D datasets are not in the shared data: the run must stop with one clear
-            // message naming the folder (and, for Replica, where it comes from).
+        let users_data = text.contains("source = \"colmap\"")
+            || (text.contains("task = \"slam\"") && !text.contains("source = \"synthetic\""));
+        if users_data && !needs_data {
+            // Real RGB-D datasets and a user's capture are not in the shared data: the run must
+            // stop with one clear message naming the folder (and, for Replica, where it comes
+            // from).
             let path = text
                 .lines()
                 .find_map(|l| l.strip_prefix("path = \""))
@@ -933,6 +933,132 @@ fn planar_rejects_bad_input_with_one_clear_line() {
             "{name}: wrote metrics"
         );
     }
+}
+
+/// A user's own capture: a COLMAP scene (six photos of 24×18, a PINHOLE camera, points in front
+/// of the cameras) trains in the nerf task, and each method's poses come back as a COLMAP model in
+/// the capture's frame and units — for the true poses exactly COLMAP's (the normalisation is
+/// undone), for BARF moved by training.
+#[test]
+fn nerf_refines_a_colmap_capture_and_writes_the_poses_back() {
+    use cpose_nerf::data::colmap::{
+        CameraModel, ColmapCamera, ColmapFormat, ColmapImage, ColmapModel, ColmapPoint,
+        read_colmap_model, write_colmap_model,
+    };
+    use nalgebra::{Isometry3, Vector3};
+    let dir = temp_dir("nerf-colmap");
+    let scene = dir.join("capture");
+    std::fs::create_dir_all(scene.join("images")).expect("temp dir is writable");
+    std::fs::create_dir_all(scene.join("sparse/0")).expect("temp dir is writable");
+    // Six cameras side by side in metres, looking along +z at points 3–6 m away.
+    let images: Vec<ColmapImage> = (0..6)
+        .map(|i| {
+            let pose = Isometry3::new(
+                Vector3::new(0.2 * i as f64, 0.05 * i as f64, 0.0),
+                Vector3::new(0.0, 0.02 * i as f64, 0.0),
+            );
+            let name = format!("frame_{i:02}.jpg");
+            cpose_nerf_image(
+                &scene.join("images").join(name.replace(".jpg", ".png")),
+                24,
+                18,
+            );
+            ColmapImage {
+                id: 10 + i,
+                camera_id: 1,
+                name,
+                world_from_camera: pose,
+                points2d: vec![],
+            }
+        })
+        .collect();
+    let points = (0..40u64)
+        .map(|k| ColmapPoint {
+            id: k + 1,
+            xyz: [
+                (k % 5) as f64 * 0.4 - 0.8,
+                (k % 3) as f64 * 0.3,
+                3.0 + (k % 7) as f64 * 0.5,
+            ],
+            rgb: [128, 128, 128],
+            error: 0.5,
+            track: (0..6).map(|i| (10 + i, 0)).collect(),
+        })
+        .collect();
+    let model = ColmapModel {
+        cameras: vec![ColmapCamera {
+            id: 1,
+            model: CameraModel::Pinhole,
+            width: 24,
+            height: 18,
+            params: vec![20.0, 21.0, 12.0, 9.0],
+        }],
+        images: Some(images.clone()),
+        points: Some(points),
+    };
+    write_colmap_model(&scene.join("sparse/0"), &model, ColmapFormat::Text, false)
+        .expect("temp dir is writable");
+    let config = workspace_root().join("configs/llff_fern.toml");
+    let mut args = vec!["run", config.to_str().expect("utf-8"), "--out", "run", "-q"];
+    for setting in [
+        "data.source=\"colmap\"",
+        "data.path=\"capture\"",
+        "data.factor=1",
+        "noise.kind=\"none\"",
+        "train.methods=[\"true_poses\", \"barf\"]",
+        "train.iterations=20",
+        "train.rays_per_step=64",
+        "render.samples=8",
+        "eval.refine_iterations=0",
+        "eval.saved_views=0",
+        "run.threads=1",
+    ] {
+        args.extend(["--set", setting]);
+    }
+    let out = cpose_in(&dir, &args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = dir.join("run");
+    let log = std::fs::read_to_string(run.join("log.txt")).expect("log.txt");
+    assert!(
+        log.contains("6 registered images of camera PINHOLE"),
+        "{log}"
+    );
+    // Five trained on (the last held out), in name order, ids and names kept.
+    let exported = |method: &str| {
+        read_colmap_model(&run.join(format!("colmap_capture_{method}")))
+            .expect("a COLMAP model")
+            .images
+            .expect("images")
+    };
+    let truth = exported("true_poses");
+    assert_eq!(truth.len(), 5);
+    for (written, input) in truth.iter().zip(&images) {
+        assert_eq!((written.id, &written.name), (input.id, &input.name));
+        let (a, b) = (written.world_from_camera, input.world_from_camera);
+        assert!(
+            (a.translation.vector - b.translation.vector).norm() < 1e-9,
+            "{a} {b}"
+        );
+        assert!(a.rotation.angle_to(&b.rotation) < 1e-9);
+    }
+    let barf = exported("barf");
+    assert_eq!(barf.len(), 5);
+    let moved = barf
+        .iter()
+        .zip(&images)
+        .map(|(a, b)| {
+            (a.world_from_camera.translation.vector - b.world_from_camera.translation.vector).norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(
+        moved > 1e-6 && moved < 0.5,
+        "BARF moved the cameras by {moved}"
+    );
+    assert!(run.join("colmap_capture_barf/cameras.txt").is_file());
 }
 
 /// Writes a small valid PNG of `width × height` through the library.

@@ -761,6 +761,13 @@ impl Unit<'_> {
         self.run_dir.file(self.file_name(stem, ext))
     }
 
+    /// `<stem>_<condition>_<method>[_s<seed>]` in the run folder: one of this unit's output
+    /// folders (e.g. a COLMAP model).
+    pub fn folder(&self, stem: &str) -> PathBuf {
+        self.run_dir
+            .file(format!("{}_{}", clean(stem), self.key.name(self.with_seed)))
+    }
+
     /// Logs `message`, prefixed by the unit's name.
     pub fn log(&self, message: impl std::fmt::Display) {
         self.run_dir.log(format_args!("{}: {message}", self.name));

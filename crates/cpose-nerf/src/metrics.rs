@@ -26,6 +26,9 @@ use crate::image::Image;
 pub const SSIM_SIGMA: f64 = 1.5;
 /// The SSIM window radius `⌊3.5·σ + 0.5⌋` (skimage `truncate = 3.5`): the window is 11 × 11.
 pub const SSIM_RADIUS: usize = 5;
+
+/// The side of SSIM's window, `2 · SSIM_RADIUS + 1`: the least image side [`ssim`] takes.
+pub const SSIM_WINDOW: usize = 2 * SSIM_RADIUS + 1;
 /// `C1 = (K1·L)²` with `K1 = 0.01` and data range `L = 1`.
 pub const SSIM_C1: f64 = 0.01 * 0.01;
 /// `C2 = (K2·L)²` with `K2 = 0.03` and data range `L = 1`.
@@ -46,7 +49,7 @@ pub fn ssim(a: &Image, b: &Image) -> f64 {
         (b.width(), b.height()),
         "ssim of images of different sizes"
     );
-    let win = 2 * SSIM_RADIUS + 1;
+    let win = SSIM_WINDOW;
     assert!(
         w >= win && h >= win,
         "ssim needs images of at least {win}×{win} pixels, got {w}×{h}"

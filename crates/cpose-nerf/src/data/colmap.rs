@@ -258,7 +258,8 @@ pub enum ColmapFormat {
 }
 
 impl ColmapFormat {
-    fn extension(self) -> &'static str {
+    /// The files' extension, `"bin"` or `"txt"`.
+    pub fn extension(self) -> &'static str {
         match self {
             ColmapFormat::Binary => "bin",
             ColmapFormat::Text => "txt",

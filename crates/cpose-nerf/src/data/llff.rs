@@ -157,7 +157,7 @@ fn image_folders(scene_dir: &Path) -> String {
 }
 
 /// The image files (`.png`, `.jpg`, `.jpeg`, any case) of `folder`, sorted by file name.
-fn list_images(folder: &Path) -> Result<Vec<PathBuf>, DataError> {
+pub(super) fn list_images(folder: &Path) -> Result<Vec<PathBuf>, DataError> {
     let io_err = |error| DataError::Io {
         path: folder.to_path_buf(),
         error,

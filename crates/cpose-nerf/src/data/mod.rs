@@ -1,7 +1,8 @@
 //! Real multi-view datasets for the `nerf` task: LLFF forward-facing scenes ([`llff`]) and the
 //! Blender / NeRF-synthetic format ([`blender`]), loaded into one small [`Dataset`] type; NumPy
 //! `.npy` arrays ([`npy`]) for them and for the event readers above this crate; COLMAP sparse
-//! models ([`colmap`]: cameras, image poses and 3-D points), read and written.
+//! models ([`colmap`]: cameras, image poses and 3-D points), read and written, and a whole COLMAP
+//! capture, photos and model, as a dataset ([`colmap_scene`]).
 //!
 //! # Conventions (see CONVENTIONS.md)
 //!
@@ -22,6 +23,8 @@ use crate::image::Image;
 
 pub mod blender;
 pub mod colmap;
+pub mod colmap_scene;
+pub mod distortion;
 pub mod llff;
 pub mod npy;
 

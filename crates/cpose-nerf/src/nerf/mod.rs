@@ -35,6 +35,9 @@
 //!   (scaled so the nearest bound is 4/3, centred on the mean camera), the last 10% of the
 //!   images held out; `[noise] kind = "identity"` is the paper's unknown-pose start.
 //! - `blender`: a NeRF-synthetic scene (`transforms_train.json`); BARF's i.i.d. noise.
+//! - `colmap`: a user's own forward-facing capture as COLMAP reconstructs it (`images/`,
+//!   `sparse/0/`; [`crate::data::colmap_scene`]), normalised and held out as `llff`; the poses
+//!   start at COLMAP's (`[noise] kind = "none"`) and are refined.
 //!
 //! Pose errors are BARF's (Procrustes on the camera centres, then mean rotation and translation
 //! errors) with one change: when the centres align best through a reflection — near-planar
@@ -49,7 +52,9 @@
 //! `traj_init.txt` (TUM), `trajectory_<condition>_<method>.png` (true, initial and estimated
 //! training cameras in evo_traj's layout, [`cpose_core::plot::trajectory_comparison`]),
 //! `view_<k>_<condition>_<method>.png` (rendered | truth), `depth_<k>_<condition>_<method>.png`,
-//! and the study's `curves.csv`, `curves.png` and `units/` ([`cpose_core::study`]).
+//! for a COLMAP source `colmap_<condition>_<method>/` (the training images' poses, not aligned,
+//! in the reconstruction's own frame and units, as a COLMAP model in the format read:
+//! [`crate::data::colmap_scene::ColmapScene::write_refined`]), and the study's `curves.csv`, `curves.png` and `units/` ([`cpose_core::study`]).
 
 pub mod eval;
 pub mod train;
@@ -359,6 +364,8 @@ impl Settings {
             noise_section.decode()?
         } else if exp.data.source == Source::Llff {
             PoseNoise::Identity {}
+        } else if exp.data.source == Source::Colmap {
+            PoseNoise::None {}
         } else {
             PoseNoise::default()
         };
@@ -415,6 +422,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
         pose_steps: (hold, warmup, rotation_warmup),
     } = Settings::new(input.config, input.run)?;
     let mut views = Views::load(&exp.data, &exp.orbit, &exp.render)?;
+    for note in &views.notes {
+        input.run_dir.log(note);
+    }
     let initial = noise.apply(&views.train_truth, views.diameter);
     let widened = views.bounds.widened_for(&views.train_truth, &initial);
     if widened.radius > views.bounds.radius * (1.0 + 1e-9) {
@@ -707,6 +717,9 @@ fn evaluate(
     write_trajectory(unit.file("traj", "txt"), &views.train_times, &aligned)?;
     if let Some(table) = correction_table {
         save_field(unit, poses, table, errors.alignment.to_sim3())?;
+    }
+    if let Some(colmap) = &views.colmap {
+        colmap.write(&unit.folder("colmap"), estimate)?;
     }
     let key = unit.key();
     let title = format!(

@@ -9,6 +9,7 @@ use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vect
 use serde::Deserialize;
 
 use crate::camera::PinholeCamera;
+use crate::data::colmap_scene::{ColmapScene, load_colmap_scene};
 use crate::data::{Dataset, blender, llff};
 use crate::field3d::SceneBounds;
 use crate::image::Image;
@@ -26,6 +27,20 @@ pub(super) enum Source {
     Llff,
     /// A NeRF-synthetic (Blender) scene.
     Blender,
+    /// A COLMAP reconstruction of forward-facing photos (`images/`, `sparse/0/`), LLFF's
+    /// setting for a user's own capture; the refined poses are written back as COLMAP models.
+    Colmap,
+}
+
+impl Source {
+    fn name(self) -> &'static str {
+        match self {
+            Source::Synthetic => "synthetic",
+            Source::Llff => "LLFF",
+            Source::Blender => "Blender",
+            Source::Colmap => "COLMAP",
+        }
+    }
 }
 
 /// `[data]`.
@@ -33,10 +48,10 @@ pub(super) enum Source {
 #[serde(deny_unknown_fields, default)]
 pub(super) struct DataConfig {
     pub(super) source: Source,
-    /// Scene folder (llff, blender).
+    /// Scene folder (llff, blender, colmap).
     path: Option<PathBuf>,
-    /// Downscale factor: LLFF reads `images_N` (default 8), Blender averages its images down
-    /// (default 1).
+    /// Downscale factor: LLFF reads `images_N` (default 8), COLMAP `images_N` if there is one
+    /// (default 1), else both average `images` down, as Blender does (default 1).
     factor: Option<u32>,
     /// Keep every k-th training frame (a faster camera); in a sequence, the frames between are
     /// held out.
@@ -136,6 +151,60 @@ pub(super) struct Views {
     pub(super) bounds: SceneBounds,
     /// Size of the camera path (the orbit diameter; the spread of LLFF cameras), for noise.
     pub(super) diameter: f64,
+    /// A COLMAP source: how to write the refined training poses back.
+    pub(super) colmap: Option<ColmapExport>,
+    /// What loading found worth a line in the log.
+    pub(super) notes: Vec<String>,
+}
+
+/// A COLMAP capture's model and the normalisation from its world frame to the training frame,
+/// to write refined poses back in the capture's own frame and units.
+pub(super) struct ColmapExport {
+    pub(super) scene: ColmapScene,
+    pub(super) normalisation: Normalisation,
+    /// The dataset index of each training view.
+    pub(super) train_indices: Vec<usize>,
+}
+
+impl ColmapExport {
+    /// Writes `estimate` (one pose per training view, training frame) as a COLMAP model into
+    /// `dir`, replacing what an interrupted attempt left there.
+    pub(super) fn write(
+        &self,
+        dir: &std::path::Path,
+        estimate: &[Isometry3<f64>],
+    ) -> anyhow::Result<()> {
+        let poses: Vec<_> = estimate
+            .iter()
+            .map(|p| self.normalisation.undo(p))
+            .collect();
+        self.scene
+            .write_refined(dir, &self.train_indices, &poses, true)?;
+        Ok(())
+    }
+}
+
+/// A forward-facing capture's change of frame (BARF's LLFF normalisation): translations scaled by
+/// `scale`, then every pose expressed relative to the `mean` camera:
+/// `normalised = mean⁻¹ ∘ scaled(pose)`.
+pub(super) struct Normalisation {
+    scale: f64,
+    mean: Isometry3<f64>,
+}
+
+impl Normalisation {
+    fn apply(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        let mut scaled = *pose;
+        scaled.translation.vector *= self.scale;
+        self.mean.inverse() * scaled
+    }
+
+    /// The pose in the capture's frame of a pose in the normalised one.
+    fn undo(&self, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        let mut scaled = self.mean * pose;
+        scaled.translation.vector /= self.scale;
+        scaled
+    }
 }
 
 impl Views {
@@ -146,10 +215,19 @@ impl Views {
         orbit: &MonocularOrbit,
         render: &RenderConfig,
     ) -> anyhow::Result<Self> {
-        match data.source {
+        let views = match data.source {
             Source::Synthetic => synthetic_views(data, orbit, render),
-            Source::Llff | Source::Blender => dataset_views(data, render),
+            Source::Llff | Source::Blender | Source::Colmap => dataset_views(data, render),
+        }?;
+        let (w, h) = (views.camera.width, views.camera.height);
+        let least = crate::metrics::SSIM_WINDOW;
+        if w < least || h < least {
+            bail!(
+                "[data]: the views are {w}×{h} pixels; the novel-view scores need at least \
+                 {least}×{least} (SSIM's window): lower data.factor or raise the size"
+            );
         }
+        Ok(views)
     }
 }
 
@@ -269,44 +347,47 @@ fn synthetic_views(
         settings,
         bounds,
         diameter: orbit.diameter(),
+        colmap: None,
+        notes: Vec::new(),
     })
 }
 
-/// BARF's LLFF normalisation: scale so that the smallest near bound becomes `1/0.75`, then
-/// express every pose relative to the mean camera (mean centre; rotation from the mean
-/// viewing and up axes, orthonormalised).
-fn normalise_llff(dataset: &mut Dataset) -> anyhow::Result<()> {
+/// BARF's LLFF normalisation, applied to the dataset's poses: scale so that the smallest near
+/// bound becomes `1/0.75`, then express every pose relative to the mean camera (mean centre;
+/// rotation from the mean viewing and up axes, orthonormalised).
+fn normalise_forward_facing(dataset: &mut Dataset) -> anyhow::Result<Normalisation> {
     let Some(bounds) = &dataset.bounds else {
-        bail!("LLFF data without depth bounds");
+        bail!("forward-facing data without depth bounds");
     };
     let near = bounds.iter().map(|b| b[0]).fold(f64::INFINITY, f64::min);
     if !(near > 0.0 && near.is_finite()) {
-        bail!("LLFF near bounds must be positive, got {near}");
+        bail!("the near depth bounds must be positive, got {near}");
     }
     let scale = 1.0 / (0.75 * near);
     let n = dataset.len() as f64;
     let mut centre = Vector3::zeros();
     let (mut z, mut y) = (Vector3::zeros(), Vector3::zeros());
-    for p in &mut dataset.world_from_camera {
-        p.translation.vector *= scale;
-        centre += p.translation.vector / n;
+    for p in &dataset.world_from_camera {
+        centre += scale * p.translation.vector / n;
         z += p.rotation * Vector3::z();
         y += p.rotation * Vector3::y();
     }
     let z = z.normalize();
     let x = y.cross(&z).normalize();
     let y = z.cross(&x);
-    let mean = Isometry3::from_parts(
-        Translation3::from(centre),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-            Matrix3::from_columns(&[x, y, z]),
-        )),
-    );
-    let inv = mean.inverse();
+    let normalisation = Normalisation {
+        scale,
+        mean: Isometry3::from_parts(
+            Translation3::from(centre),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+                Matrix3::from_columns(&[x, y, z]),
+            )),
+        ),
+    };
     for p in &mut dataset.world_from_camera {
-        *p = inv * *p;
+        *p = normalisation.apply(p);
     }
-    Ok(())
+    Ok(normalisation)
 }
 
 /// `count` indices of `0..n` evenly spread (the middle of each of `count` equal parts).
@@ -346,18 +427,17 @@ fn downscaled(mut dataset: Dataset, factor: u32) -> anyhow::Result<Dataset> {
 fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result<Views> {
     let Some(path) = &d.path else {
         bail!(
-            "[data] path: the {} scene folder is required for source = {:?}",
-            if d.source == Source::Llff {
-                "LLFF"
-            } else {
-                "Blender"
-            },
-            d.source
+            "[data] path: the {} scene folder is required for source = \"{}\"",
+            d.source.name(),
+            d.source.name().to_lowercase()
         );
     };
-    if d.source == Source::Llff && (d.sequence || d.eval_split.is_some() || d.split != "train") {
+    let forward_facing = matches!(d.source, Source::Llff | Source::Colmap);
+    if forward_facing && (d.sequence || d.eval_split.is_some() || d.split != "train") {
         bail!(
-            "[data] split, sequence and eval_split are for Blender scenes; LLFF images are one sequence in file order already"
+            "[data] split, sequence and eval_split are for Blender scenes; {} images are one \
+             sequence in file-name order already",
+            d.source.name()
         );
     }
     if d.subsample == 0 {
@@ -366,18 +446,45 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
     if d.factor == Some(0) {
         bail!("[data] factor = 0: expected at least 1");
     }
+    let forward = (
+        Sampling::InverseDepth {
+            near: 1.0,
+            far: f64::INFINITY,
+        },
+        None,
+    );
+    let mut notes = Vec::new();
+    let mut scene = None;
     let (mut dataset, settings_default, unbounded) = match d.source {
-        Source::Llff => (
-            llff::load_llff(path, d.factor.unwrap_or(8))?,
-            (
-                Sampling::InverseDepth {
-                    near: 1.0,
-                    far: f64::INFINITY,
+        Source::Llff => (llff::load_llff(path, d.factor.unwrap_or(8))?, forward, true),
+        Source::Colmap => {
+            let (dataset, colmap) = load_colmap_scene(path, d.factor.unwrap_or(1))?;
+            notes.push(format!(
+                "COLMAP model {}: {} registered images of camera {}{}{}",
+                colmap.model_dir.display(),
+                dataset.len(),
+                colmap.model.cameras[0].model.name(),
+                if colmap.max_distortion_px > 0.0 {
+                    format!(
+                        ", undistorted (pixels moved by up to {:.2})",
+                        colmap.max_distortion_px
+                    )
+                } else {
+                    String::new()
                 },
-                None,
-            ),
-            true,
-        ),
+                if colmap.unregistered.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        "; {} image files not registered, skipped (e.g. {})",
+                        colmap.unregistered.len(),
+                        colmap.unregistered[0]
+                    )
+                },
+            ));
+            scene = Some(colmap);
+            (dataset, forward, true)
+        }
         _ => (
             downscaled(
                 blender::load_blender(path, &blender_options(d, &d.split, d.sequence))?,
@@ -400,9 +507,11 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
             dataset.len()
         );
     }
-    if d.source == Source::Llff {
-        normalise_llff(&mut dataset)?;
-    }
+    let normalisation = if forward_facing {
+        Some(normalise_forward_facing(&mut dataset)?)
+    } else {
+        None
+    };
     let n = dataset.len();
     let split_views = |name: &str, count: usize| -> anyhow::Result<TestViews> {
         let other = downscaled(
@@ -455,7 +564,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         ((0..n).map(|i| i as f64).collect(), keep, vec![test])
     } else {
         // BARF: the last 10% (at least one) held out.
-        let held_out = if d.source == Source::Llff {
+        let held_out = if forward_facing {
             (n / 10).max(1)
         } else {
             d.test_views.min(n / 5).max(1)
@@ -505,6 +614,13 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
             String::new()
         }
     );
+    let colmap = scene
+        .zip(normalisation)
+        .map(|(scene, normalisation)| ColmapExport {
+            scene,
+            normalisation,
+            train_indices: keep.clone(),
+        });
     Ok(Views {
         condition,
         camera: dataset.camera,
@@ -515,6 +631,8 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         settings: resolve_settings(render_config, settings_default, &bounds)?,
         bounds,
         diameter: 2.0 * spread.max(1e-9),
+        colmap,
+        notes,
     })
 }
 
