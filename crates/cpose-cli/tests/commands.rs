@@ -935,41 +935,41 @@ fn planar_rejects_bad_input_with_one_clear_line() {
     }
 }
 
-/// A user's own capture: a COLMAP scene (six photos of 24×18, a PINHOLE camera, points in front
-/// of the cameras) trains in the nerf task, and each method's poses come back as a COLMAP model in
-/// the capture's frame and units — for the true poses exactly COLMAP's (the normalisation is
-/// undone), for BARF moved by training.
+/// A user's own capture, six photos of 24×18 by a pinhole camera with points 3–6 m in front, as
+/// a COLMAP model and as nerfstudio's `transforms.json`: each trains in the nerf task and each
+/// method's poses come back in the capture's format, frame and units — for the true poses exactly
+/// the capture's (the normalisation is undone), for BARF moved by training.
 #[test]
-fn nerf_refines_a_colmap_capture_and_writes_the_poses_back() {
+fn nerf_refines_a_users_capture_and_writes_the_poses_back() {
     use cpose_nerf::data::colmap::{
         CameraModel, ColmapCamera, ColmapFormat, ColmapImage, ColmapModel, ColmapPoint,
         read_colmap_model, write_colmap_model,
     };
+    use cpose_nerf::data::nerfstudio::load_nerfstudio;
     use nalgebra::{Isometry3, Vector3};
-    let dir = temp_dir("nerf-colmap");
+    let dir = temp_dir("nerf-capture");
     let scene = dir.join("capture");
     std::fs::create_dir_all(scene.join("images")).expect("temp dir is writable");
     std::fs::create_dir_all(scene.join("sparse/0")).expect("temp dir is writable");
-    // Six cameras side by side in metres, looking along +z at points 3–6 m away.
-    let images: Vec<ColmapImage> = (0..6)
+    // Six cameras side by side in metres, looking along +z.
+    let poses: Vec<Isometry3<f64>> = (0..6)
         .map(|i| {
-            let pose = Isometry3::new(
+            Isometry3::new(
                 Vector3::new(0.2 * i as f64, 0.05 * i as f64, 0.0),
                 Vector3::new(0.0, 0.02 * i as f64, 0.0),
-            );
-            let name = format!("frame_{i:02}.jpg");
-            cpose_nerf_image(
-                &scene.join("images").join(name.replace(".jpg", ".png")),
-                24,
-                18,
-            );
-            ColmapImage {
-                id: 10 + i,
-                camera_id: 1,
-                name,
-                world_from_camera: pose,
-                points2d: vec![],
-            }
+            )
+        })
+        .collect();
+    for i in 0..6 {
+        cpose_nerf_image(&scene.join(format!("images/frame_{i:02}.png")), 24, 18);
+    }
+    let images: Vec<ColmapImage> = (0..6)
+        .map(|i| ColmapImage {
+            id: 10 + i,
+            camera_id: 1,
+            name: format!("frame_{i:02}.jpg"),
+            world_from_camera: poses[i as usize],
+            points2d: vec![],
         })
         .collect();
     let points = (0..40u64)
@@ -998,67 +998,102 @@ fn nerf_refines_a_colmap_capture_and_writes_the_poses_back() {
     };
     write_colmap_model(&scene.join("sparse/0"), &model, ColmapFormat::Text, false)
         .expect("temp dir is writable");
-    let config = workspace_root().join("configs/llff_fern.toml");
-    let mut args = vec!["run", config.to_str().expect("utf-8"), "--out", "run", "-q"];
-    for setting in [
-        "data.source=\"colmap\"",
-        "data.path=\"capture\"",
-        "data.factor=1",
-        "noise.kind=\"none\"",
-        "train.methods=[\"true_poses\", \"barf\"]",
-        "train.iterations=20",
-        "train.rays_per_step=64",
-        "render.samples=8",
-        "eval.refine_iterations=0",
-        "eval.saved_views=0",
-        "run.threads=1",
-    ] {
-        args.extend(["--set", setting]);
-    }
-    let out = cpose_in(&dir, &args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let run = dir.join("run");
-    let log = std::fs::read_to_string(run.join("log.txt")).expect("log.txt");
-    assert!(
-        log.contains("6 registered images of camera PINHOLE"),
-        "{log}"
-    );
-    // Five trained on (the last held out), in name order, ids and names kept.
-    let exported = |method: &str| {
-        read_colmap_model(&run.join(format!("colmap_capture_{method}")))
-            .expect("a COLMAP model")
-            .images
-            .expect("images")
-    };
-    let truth = exported("true_poses");
-    assert_eq!(truth.len(), 5);
-    for (written, input) in truth.iter().zip(&images) {
-        assert_eq!((written.id, &written.name), (input.id, &input.name));
-        let (a, b) = (written.world_from_camera, input.world_from_camera);
-        assert!(
-            (a.translation.vector - b.translation.vector).norm() < 1e-9,
-            "{a} {b}"
-        );
-        assert!(a.rotation.angle_to(&b.rotation) < 1e-9);
-    }
-    let barf = exported("barf");
-    assert_eq!(barf.len(), 5);
-    let moved = barf
+    let frames: Vec<serde_json::Value> = poses
         .iter()
-        .zip(&images)
-        .map(|(a, b)| {
-            (a.world_from_camera.translation.vector - b.world_from_camera.translation.vector).norm()
+        .enumerate()
+        .map(|(i, pose)| {
+            let m = cpose_core::geometry::world_from_cam_gl_from_cv(pose).to_homogeneous();
+            let rows: Vec<Vec<f64>> = (0..4).map(|r| (0..4).map(|c| m[(r, c)]).collect()).collect();
+            serde_json::json!({"file_path": format!("images/frame_{i:02}.png"), "transform_matrix": rows})
         })
-        .fold(0.0, f64::max);
-    assert!(
-        moved > 1e-6 && moved < 0.5,
-        "BARF moved the cameras by {moved}"
-    );
-    assert!(run.join("colmap_capture_barf/cameras.txt").is_file());
+        .collect();
+    let transforms = serde_json::json!({
+        "camera_model": "PINHOLE", "fl_x": 20.0, "fl_y": 21.0, "cx": 12.0, "cy": 9.0,
+        "w": 24, "h": 18, "frames": frames,
+    });
+    write(&scene, "transforms.json", &transforms.to_string());
+
+    let config = workspace_root().join("configs/colmap_capture.toml");
+    for source in ["colmap", "nerfstudio"] {
+        let out_dir = format!("run-{source}");
+        let mut args = vec![
+            "run",
+            config.to_str().expect("utf-8"),
+            "--out",
+            &out_dir,
+            "-q",
+        ];
+        let source_setting = format!("data.source=\"{source}\"");
+        for setting in [
+            &source_setting,
+            "data.path=\"capture\"",
+            "data.factor=1",
+            "train.methods=[\"true_poses\", \"barf\"]",
+            "train.iterations=20",
+            "train.rays_per_step=64",
+            "render.samples=8",
+            "eval.refine_iterations=0",
+            "eval.saved_views=0",
+            "run.threads=1",
+        ] {
+            args.extend(["--set", setting]);
+        }
+        let out = cpose_in(&dir, &args);
+        assert!(
+            out.status.success(),
+            "{source}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let run = dir.join(&out_dir);
+        let log = std::fs::read_to_string(run.join("log.txt")).expect("log.txt");
+        // Five trained on (the last held out), in name order, with their names.
+        let exported = |method: &str| -> Vec<(String, Isometry3<f64>)> {
+            if source == "colmap" {
+                let images = read_colmap_model(&run.join(format!("colmap_capture_{method}")))
+                    .expect("a COLMAP model")
+                    .images
+                    .expect("images");
+                images
+                    .into_iter()
+                    .map(|i| (i.name, i.world_from_camera))
+                    .collect()
+            } else {
+                let (data, _) =
+                    load_nerfstudio(run.join(format!("transforms_capture_{method}.json")), 1)
+                        .expect("a transforms.json");
+                let names = data
+                    .names
+                    .iter()
+                    .map(|n| n.rsplit('/').next().unwrap_or(n).to_owned());
+                names.zip(data.world_from_camera).collect()
+            }
+        };
+        if source == "colmap" {
+            assert!(
+                log.contains("6 registered images of camera PINHOLE"),
+                "{log}"
+            );
+        } else {
+            assert!(log.contains("transforms.json: 6 frames"), "{log}");
+        }
+        let truth = exported("true_poses");
+        assert_eq!(truth.len(), 5);
+        for (k, (name, pose)) in truth.iter().enumerate() {
+            assert!(name.starts_with(&format!("frame_{k:02}.")), "{name}");
+            let input = &poses[k];
+            assert!((pose.translation.vector - input.translation.vector).norm() < 1e-9);
+            assert!(pose.rotation.angle_to(&input.rotation) < 1e-9);
+        }
+        let moved = exported("barf")
+            .iter()
+            .zip(&poses)
+            .map(|((_, a), b)| (a.translation.vector - b.translation.vector).norm())
+            .fold(0.0, f64::max);
+        assert!(
+            moved > 1e-6 && moved < 0.5,
+            "{source}: BARF moved the cameras by {moved}"
+        );
+    }
 }
 
 /// Writes a small valid PNG of `width × height` through the library.

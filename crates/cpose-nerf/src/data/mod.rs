@@ -2,7 +2,8 @@
 //! Blender / NeRF-synthetic format ([`blender`]), loaded into one small [`Dataset`] type; NumPy
 //! `.npy` arrays ([`npy`]) for them and for the event readers above this crate; COLMAP sparse
 //! models ([`colmap`]: cameras, image poses and 3-D points), read and written, and a whole COLMAP
-//! capture, photos and model, as a dataset ([`colmap_scene`]).
+//! capture, photos and model, as a dataset ([`colmap_scene`]); nerfstudio's `transforms.json`
+//! ([`nerfstudio`]).
 //!
 //! # Conventions (see CONVENTIONS.md)
 //!
@@ -26,6 +27,7 @@ pub mod colmap;
 pub mod colmap_scene;
 pub mod distortion;
 pub mod llff;
+pub mod nerfstudio;
 pub mod npy;
 
 /// Images with their poses and one shared camera. All vectors have one entry per image, in the

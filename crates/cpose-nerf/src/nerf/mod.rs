@@ -38,6 +38,9 @@
 //! - `colmap`: a user's own forward-facing capture as COLMAP reconstructs it (`images/`,
 //!   `sparse/0/`; [`crate::data::colmap_scene`]), normalised and held out as `llff`; the poses
 //!   start at COLMAP's (`[noise] kind = "none"`) and are refined.
+//! - `nerfstudio`: a user's capture around an object as nerfstudio's `transforms.json`
+//!   ([`crate::data::nerfstudio`]): centred on the mean camera, scaled to cameras 4 units away,
+//!   the background contracted beyond; the last 10% held out; the poses start at the file's.
 //!
 //! Pose errors are BARF's (Procrustes on the camera centres, then mean rotation and translation
 //! errors) with one change: when the centres align best through a reflection — near-planar
@@ -52,9 +55,11 @@
 //! `traj_init.txt` (TUM), `trajectory_<condition>_<method>.png` (true, initial and estimated
 //! training cameras in evo_traj's layout, [`cpose_core::plot::trajectory_comparison`]),
 //! `view_<k>_<condition>_<method>.png` (rendered | truth), `depth_<k>_<condition>_<method>.png`,
-//! for a COLMAP source `colmap_<condition>_<method>/` (the training images' poses, not aligned,
-//! in the reconstruction's own frame and units, as a COLMAP model in the format read:
-//! [`crate::data::colmap_scene::ColmapScene::write_refined`]), and the study's `curves.csv`, `curves.png` and `units/` ([`cpose_core::study`]).
+//! for a user's capture the training images' poses, not aligned, in the capture's own frame and
+//! units: `colmap_<condition>_<method>/` (a COLMAP model in the format read,
+//! [`crate::data::colmap_scene::ColmapScene::write_refined`]) or
+//! `transforms_<condition>_<method>.json` ([`crate::data::nerfstudio::NerfstudioScene::write_refined`]),
+//! and the study's `curves.csv`, `curves.png` and `units/` ([`cpose_core::study`]).
 
 pub mod eval;
 pub mod train;
@@ -364,7 +369,7 @@ impl Settings {
             noise_section.decode()?
         } else if exp.data.source == Source::Llff {
             PoseNoise::Identity {}
-        } else if exp.data.source == Source::Colmap {
+        } else if matches!(exp.data.source, Source::Colmap | Source::Nerfstudio) {
             PoseNoise::None {}
         } else {
             PoseNoise::default()
@@ -718,8 +723,8 @@ fn evaluate(
     if let Some(table) = correction_table {
         save_field(unit, poses, table, errors.alignment.to_sim3())?;
     }
-    if let Some(colmap) = &views.colmap {
-        colmap.write(&unit.folder("colmap"), estimate)?;
+    if let Some(export) = &views.export {
+        export.write(unit, estimate)?;
     }
     let key = unit.key();
     let title = format!(

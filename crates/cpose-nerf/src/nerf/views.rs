@@ -10,6 +10,7 @@ use serde::Deserialize;
 
 use crate::camera::PinholeCamera;
 use crate::data::colmap_scene::{ColmapScene, load_colmap_scene};
+use crate::data::nerfstudio::{NerfstudioScene, load_nerfstudio};
 use crate::data::{Dataset, blender, llff};
 use crate::field3d::SceneBounds;
 use crate::image::Image;
@@ -30,6 +31,9 @@ pub(super) enum Source {
     /// A COLMAP reconstruction of forward-facing photos (`images/`, `sparse/0/`), LLFF's
     /// setting for a user's own capture; the refined poses are written back as COLMAP models.
     Colmap,
+    /// nerfstudio's `transforms.json` of photos taken around an object (Blender's setting with
+    /// a real background); the refined poses are written back as `transforms.json` files.
+    Nerfstudio,
 }
 
 impl Source {
@@ -39,6 +43,7 @@ impl Source {
             Source::Llff => "LLFF",
             Source::Blender => "Blender",
             Source::Colmap => "COLMAP",
+            Source::Nerfstudio => "nerfstudio",
         }
     }
 }
@@ -151,42 +156,56 @@ pub(super) struct Views {
     pub(super) bounds: SceneBounds,
     /// Size of the camera path (the orbit diameter; the spread of LLFF cameras), for noise.
     pub(super) diameter: f64,
-    /// A COLMAP source: how to write the refined training poses back.
-    pub(super) colmap: Option<ColmapExport>,
+    /// A user's capture (COLMAP, nerfstudio): how to write the refined training poses back.
+    pub(super) export: Option<PoseExport>,
     /// What loading found worth a line in the log.
     pub(super) notes: Vec<String>,
 }
 
-/// A COLMAP capture's model and the normalisation from its world frame to the training frame,
-/// to write refined poses back in the capture's own frame and units.
-pub(super) struct ColmapExport {
-    pub(super) scene: ColmapScene,
+/// A user's capture and the normalisation from its world frame to the training frame, to write
+/// refined poses back in the capture's own format, frame and units.
+pub(super) struct PoseExport {
+    pub(super) capture: Capture,
     pub(super) normalisation: Normalisation,
     /// The dataset index of each training view.
     pub(super) train_indices: Vec<usize>,
 }
 
-impl ColmapExport {
-    /// Writes `estimate` (one pose per training view, training frame) as a COLMAP model into
-    /// `dir`, replacing what an interrupted attempt left there.
+/// The file formats poses are written back in.
+pub(super) enum Capture {
+    Colmap(ColmapScene),
+    Nerfstudio(NerfstudioScene),
+}
+
+impl PoseExport {
+    /// Writes `estimate` (one pose per training view, training frame) beside the unit's other
+    /// files: `colmap_<condition>_<method>/` or `transforms_<condition>_<method>.json`, replacing
+    /// what an interrupted attempt left there.
     pub(super) fn write(
         &self,
-        dir: &std::path::Path,
+        unit: &cpose_core::study::Unit,
         estimate: &[Isometry3<f64>],
     ) -> anyhow::Result<()> {
         let poses: Vec<_> = estimate
             .iter()
             .map(|p| self.normalisation.undo(p))
             .collect();
-        self.scene
-            .write_refined(dir, &self.train_indices, &poses, true)?;
+        match &self.capture {
+            Capture::Colmap(scene) => {
+                scene.write_refined(&unit.folder("colmap"), &self.train_indices, &poses, true)?
+            }
+            Capture::Nerfstudio(scene) => scene.write_refined(
+                &unit.file("transforms", "json"),
+                &self.train_indices,
+                &poses,
+            )?,
+        }
         Ok(())
     }
 }
 
-/// A forward-facing capture's change of frame (BARF's LLFF normalisation): translations scaled by
-/// `scale`, then every pose expressed relative to the `mean` camera:
-/// `normalised = mean⁻¹ ∘ scaled(pose)`.
+/// A capture's change of frame: translations scaled by `scale`, then every pose expressed
+/// relative to `mean`: `normalised = mean⁻¹ ∘ scaled(pose)`.
 pub(super) struct Normalisation {
     scale: f64,
     mean: Isometry3<f64>,
@@ -217,7 +236,9 @@ impl Views {
     ) -> anyhow::Result<Self> {
         let views = match data.source {
             Source::Synthetic => synthetic_views(data, orbit, render),
-            Source::Llff | Source::Blender | Source::Colmap => dataset_views(data, render),
+            Source::Llff | Source::Blender | Source::Colmap | Source::Nerfstudio => {
+                dataset_views(data, render)
+            }
         }?;
         let (w, h) = (views.camera.width, views.camera.height);
         let least = crate::metrics::SSIM_WINDOW;
@@ -347,7 +368,7 @@ fn synthetic_views(
         settings,
         bounds,
         diameter: orbit.diameter(),
-        colmap: None,
+        export: None,
         notes: Vec::new(),
     })
 }
@@ -383,6 +404,41 @@ fn normalise_forward_facing(dataset: &mut Dataset) -> anyhow::Result<Normalisati
                 Matrix3::from_columns(&[x, y, z]),
             )),
         ),
+    };
+    for p in &mut dataset.world_from_camera {
+        *p = normalisation.apply(p);
+    }
+    Ok(normalisation)
+}
+
+/// The distance of the cameras from the object after [`normalise_object_centric`], Blender's
+/// orbit radius.
+const OBJECT_CAMERA_DISTANCE: f64 = 4.0;
+
+/// A capture around an object, as Blender's: centred on the mean camera centre (about the
+/// object when the cameras surround it), scaled so that the cameras' mean distance from it is
+/// [`OBJECT_CAMERA_DISTANCE`]; orientations unchanged.
+fn normalise_object_centric(dataset: &mut Dataset) -> anyhow::Result<Normalisation> {
+    let n = dataset.len() as f64;
+    let centre: Vector3<f64> = dataset
+        .world_from_camera
+        .iter()
+        .map(|p| p.translation.vector)
+        .sum::<Vector3<f64>>()
+        / n;
+    let spread = dataset
+        .world_from_camera
+        .iter()
+        .map(|p| (p.translation.vector - centre).norm())
+        .sum::<f64>()
+        / n;
+    if !(spread > 0.0 && spread.is_finite()) {
+        bail!("the cameras of a capture around an object must not share one centre");
+    }
+    let scale = OBJECT_CAMERA_DISTANCE / spread;
+    let normalisation = Normalisation {
+        scale,
+        mean: Isometry3::translation(scale * centre.x, scale * centre.y, scale * centre.z),
     };
     for p in &mut dataset.world_from_camera {
         *p = normalisation.apply(p);
@@ -454,7 +510,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         None,
     );
     let mut notes = Vec::new();
-    let mut scene = None;
+    let mut capture = None;
     let (mut dataset, settings_default, unbounded) = match d.source {
         Source::Llff => (llff::load_llff(path, d.factor.unwrap_or(8))?, forward, true),
         Source::Colmap => {
@@ -482,8 +538,35 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
                     )
                 },
             ));
-            scene = Some(colmap);
+            capture = Some(Capture::Colmap(colmap));
             (dataset, forward, true)
+        }
+        Source::Nerfstudio => {
+            let (dataset, scene) = load_nerfstudio(path, d.factor.unwrap_or(1))?;
+            notes.push(format!(
+                "nerfstudio {}: {} frames{}",
+                scene.json_path.display(),
+                dataset.len(),
+                if scene.max_distortion_px > 0.0 {
+                    format!(
+                        ", undistorted (pixels moved by up to {:.2})",
+                        scene.max_distortion_px
+                    )
+                } else {
+                    String::new()
+                }
+            ));
+            capture = Some(Capture::Nerfstudio(scene));
+            // Around the object, the background beyond: samples uniform in disparity from the
+            // nearest object depth (cameras at distance 4, object radius about 1.5).
+            let around = (
+                Sampling::InverseDepth {
+                    near: 2.0,
+                    far: f64::INFINITY,
+                },
+                None,
+            );
+            (dataset, around, true)
         }
         _ => (
             downscaled(
@@ -509,6 +592,8 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
     }
     let normalisation = if forward_facing {
         Some(normalise_forward_facing(&mut dataset)?)
+    } else if d.source == Source::Nerfstudio {
+        Some(normalise_object_centric(&mut dataset)?)
     } else {
         None
     };
@@ -564,7 +649,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         ((0..n).map(|i| i as f64).collect(), keep, vec![test])
     } else {
         // BARF: the last 10% (at least one) held out.
-        let held_out = if forward_facing {
+        let held_out = if forward_facing || d.source == Source::Nerfstudio {
             (n / 10).max(1)
         } else {
             d.test_views.min(n / 5).max(1)
@@ -591,7 +676,14 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         .iter()
         .map(|c| (c - mean).norm())
         .fold(0.0, f64::max);
-    let bounds = if unbounded {
+    let bounds = if d.source == Source::Nerfstudio {
+        // Around the object at the origin; the background contracted beyond.
+        SceneBounds {
+            centre: [0.0; 3],
+            radius: 2.0,
+            unbounded: true,
+        }
+    } else if unbounded {
         SceneBounds {
             centre: [0.0, 0.0, 2.0],
             radius: 2.0,
@@ -604,9 +696,16 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
             unbounded: false,
         }
     };
+    // A scene folder's name (the folder of a file such as a transforms.json).
+    let folder = if path.is_file() {
+        path.parent().unwrap_or(path)
+    } else {
+        path
+    };
     let condition = format!(
         "{}{}",
-        path.file_name()
+        folder
+            .file_name()
             .map_or("scene".into(), |s| s.to_string_lossy()),
         if d.subsample > 1 {
             format!("/{}", d.subsample)
@@ -614,10 +713,10 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
             String::new()
         }
     );
-    let colmap = scene
+    let export = capture
         .zip(normalisation)
-        .map(|(scene, normalisation)| ColmapExport {
-            scene,
+        .map(|(capture, normalisation)| PoseExport {
+            capture,
             normalisation,
             train_indices: keep.clone(),
         });
@@ -631,7 +730,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
         settings: resolve_settings(render_config, settings_default, &bounds)?,
         bounds,
         diameter: 2.0 * spread.max(1e-9),
-        colmap,
+        export,
         notes,
     })
 }
