@@ -549,6 +549,13 @@ fn blender(dir: &Path) {
     }
 }
 
+/// A COLMAP text model: one pinhole camera of 12 × 10, three images, one point seen by all.
+const COLMAP_CAMERAS: &str = "1 PINHOLE 12 10 10 10 6 5\n";
+const COLMAP_IMAGES: &str =
+    "1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 0.1 0 0 1 b.png\n\n3 1 0 0 0 0.2 0 0 1 c.png\n\n";
+const COLMAP_POINTS: &str = "1 0 0 5 128 128 128 0.5 1 0 2 0 3 0\n";
+const NERFSTUDIO_FISHEYE: &str = r#"{"camera_model": "OPENCV_FISHEYE", "fl_x": 10, "fl_y": 10, "cx": 6, "cy": 5, "w": 12, "h": 10, "frames": [{"file_path": "a.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]}"#;
+
 const IDENTITY_ROW: &str = "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n";
 const IDENTITY_4X4: &str = "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
 const CAM_PARAMS: &str = r#"{"camera": {"w": 16, "h": 12, "fx": 10.0, "fy": 10.0, "cx": 7.5, "cy": 5.5, "scale": 1000.0}}"#;
@@ -1932,11 +1939,11 @@ fn task_configs() {
         Case {
             name: "nerf: unknown source",
             files: &[],
-            args: &["run", NERF, "--set", "data.source=\"colmap\""],
+            args: &["run", NERF, "--set", "data.source=\"kitti\""],
             code: 2,
             expect: &[
                 "nerf_synthetic.toml: TOML parse error",
-                "unknown variant `colmap`, expected one of `synthetic`, `llff`, `blender`",
+                "unknown variant `kitti`, expected one of `synthetic`, `llff`, `blender`, `colmap`, `nerfstudio`",
             ],
         },
         Case {
@@ -1954,7 +1961,93 @@ fn task_configs() {
             files: &[],
             args: &["run", NERF, "--set", "data.source=\"llff\""],
             code: 1,
-            expect: &["[data] path: the LLFF scene folder is required for source = Llff"],
+            expect: &["[data] path: the LLFF scene folder is required for source = \"llff\""],
+        },
+        Case {
+            name: "nerf: colmap image without its photo",
+            files: &[
+                ("sparse/0/cameras.txt", T(COLMAP_CAMERAS)),
+                ("sparse/0/images.txt", T(COLMAP_IMAGES)),
+                ("sparse/0/points3D.txt", T(COLMAP_POINTS)),
+                ("images/a.png", B(rgb_12x10)),
+                ("images/b.png", B(rgb_12x10)),
+            ],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"colmap\"",
+                "--set",
+                "data.path=\".\"",
+            ],
+            code: 1,
+            expect: &[
+                "images/c.png",
+                "the photo of a registered image",
+                "no such file",
+            ],
+        },
+        Case {
+            name: "nerf: colmap without images.txt",
+            files: &[
+                ("sparse/0/cameras.txt", T(COLMAP_CAMERAS)),
+                ("sparse/0/points3D.txt", T(COLMAP_POINTS)),
+            ],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"colmap\"",
+                "--set",
+                "data.path=\".\"",
+            ],
+            code: 1,
+            expect: &["sparse/0", "an images.bin or images.txt"],
+        },
+        Case {
+            name: "nerf: colmap without a model",
+            files: &[("images/a.png", B(rgb_12x10))],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"colmap\"",
+                "--set",
+                "data.path=\".\"",
+            ],
+            code: 1,
+            expect: &["a COLMAP reconstruction: sparse/0/ or sparse/"],
+        },
+        Case {
+            name: "nerf: nerfstudio fisheye",
+            files: &[("transforms.json", T(NERFSTUDIO_FISHEYE))],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"nerfstudio\"",
+                "--set",
+                "data.path=\".\"",
+            ],
+            code: 1,
+            expect: &[
+                "transforms.json",
+                "camera_model PINHOLE, SIMPLE_PINHOLE or OPENCV",
+            ],
+        },
+        Case {
+            name: "nerf: nerfstudio without frames",
+            files: &[("transforms.json", T("{\"fl_x\": 10, \"frames\": []}"))],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"nerfstudio\"",
+                "--set",
+                "data.path=\".\"",
+            ],
+            code: 1,
+            expect: &["transforms.json", "a non-empty list `frames`"],
         },
         Case {
             name: "nerf: no frames",
@@ -1970,9 +2063,9 @@ fn task_configs() {
                 "run",
                 NERF,
                 "--set",
-                "data.width=8",
+                "data.width=12",
                 "--set",
-                "data.height=8",
+                "data.height=12",
                 "--set",
                 "noise.kind=\"gaussian\"",
             ],
@@ -1989,9 +2082,9 @@ fn task_configs() {
                 "run",
                 NERF,
                 "--set",
-                "data.width=8",
+                "data.width=12",
                 "--set",
-                "data.height=8",
+                "data.height=12",
                 "--set",
                 "noise.max_rotation_deg=nan",
             ],
@@ -2005,9 +2098,9 @@ fn task_configs() {
                 "run",
                 NERF,
                 "--set",
-                "data.width=8",
+                "data.width=12",
                 "--set",
-                "data.height=8",
+                "data.height=12",
                 "--set",
                 "render.samples=0",
             ],
@@ -2021,9 +2114,9 @@ fn task_configs() {
                 "run",
                 NERF,
                 "--set",
-                "data.width=8",
+                "data.width=12",
                 "--set",
-                "data.height=8",
+                "data.height=12",
                 "--set",
                 "render.sampling=\"log\"",
             ],
@@ -2049,9 +2142,9 @@ fn task_configs() {
                 "run",
                 NERF,
                 "--set",
-                "data.width=8",
+                "data.width=12",
                 "--set",
-                "data.height=8",
+                "data.height=12",
                 "--set",
                 "train.pose_warmup=2",
             ],
@@ -2065,9 +2158,9 @@ fn task_configs() {
                 "run",
                 NERF,
                 "--set",
-                "data.width=8",
+                "data.width=12",
                 "--set",
-                "data.height=8",
+                "data.height=12",
                 "--set",
                 "posenet.translation_scale=-1",
             ],
