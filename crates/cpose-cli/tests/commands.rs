@@ -1469,6 +1469,44 @@ fn assert_query_reproduces(dir: &Path, field: &Path, traj: &Path, tolerance: (f6
     }
 }
 
+/// `events` saves PoseNet's camera path over the whole recording: `cpose query` at the
+/// evaluation times gives its trajectory file.
+#[test]
+fn events_saves_posenets_path_and_query_reproduces_it() {
+    let dir = temp_dir("query-events");
+    let config = workspace_root().join("configs/events_interp.toml");
+    let mut args = vec!["run", config.to_str().expect("utf-8"), "--out", "run", "-q"];
+    for setting in [
+        "simulation.width=24",
+        "simulation.height=18",
+        "simulation.render_steps=40",
+        "simulation.held_out_views=1",
+        "experiment.known_poses=[6]",
+        "train.iterations=20",
+        "train.rays_per_step=64",
+        "train.windows_per_step=2",
+        "render.samples=12",
+        "eval.pose_samples=10",
+        "run.threads=1",
+    ] {
+        args.extend(["--set", setting]);
+    }
+    let out = cpose_in(&dir, &args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = dir.join("run");
+    assert_query_reproduces(
+        &dir,
+        &run.join("field_K6_posenet.safetensors"),
+        &run.join("traj_K6_posenet.txt"),
+        (1e-3, 1e-4),
+    );
+    assert!(!run.join("field_K6_eventnerf.safetensors").exists());
+}
+
 /// `nerf` saves the cameras of every method that learns a correction, `C(t) ∘ init(t)` in the
 /// frame of its aligned trajectory: `cpose query` at the frame times gives that trajectory.
 #[test]

@@ -40,6 +40,8 @@
 //! trans_err_su, …, psnr_db, ssim, final_loss, wall_s}}}`, `curves.csv`, `units/`):
 //! - `traj_gt.txt`: the truth at the evaluation times (TUM);
 //! - `traj_<condition>_<method>.txt`: the method's path there (TUM);
+//! - `field_<condition>_posenet.safetensors`: PoseNet's whole camera path, `C(t) ∘ init(t)` over
+//!   the recording, as one pose field for `cpose query` (the initial path sampled 2000 times);
 //! - `trajectory_<condition>_<method>.png`: truth, initial and learnt path seen from above;
 //! - `view_<k>_<condition>_<method>.png`: held-out view `k` rendered and colour-corrected,
 //!   beside the truth; `depth_<k>_<condition>_<method>.png`: its depth;
@@ -728,6 +730,9 @@ const RECENT: usize = 100;
 
 /// Trains one method in one condition, reporting and checkpointing through `unit`, and
 /// evaluates it.
+/// Samples of the initial path in a saved PoseNet field (`field_<condition>_posenet.safetensors`).
+const SAVED_PATH_SAMPLES: usize = 2000;
+
 fn run_method(
     setup: &Setup<'_>,
     condition: &Condition,
@@ -853,6 +858,21 @@ fn run_method(
         None => None,
     };
     drop(trainer);
+    if let (Method::Posenet, Some(config)) = (method, &setup.posenet) {
+        // The initial path sampled densely enough that interpolating between samples is exact
+        // to well below the poses' f32 precision; the frame is the trajectory files' own.
+        let times: Vec<f64> = (0..=SAVED_PATH_SAMPLES)
+            .map(|k| rec.duration * k as f64 / SAVED_PATH_SAMPLES as f64)
+            .collect();
+        let init: Vec<_> = times.iter().map(|&t| initial.at(t)).collect();
+        cpose_nerf::poses::save_corrected_field(
+            &unit.file("field", "safetensors"),
+            (&config.field_table(), poses.params()),
+            &times,
+            &init,
+            cpose_core::eval::Sim3::identity(),
+        )?;
+    }
     let init: Vec<_> = setup.eval_times.iter().map(|&t| initial.at(t)).collect();
     evaluate(
         setup,

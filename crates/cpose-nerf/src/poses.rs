@@ -16,7 +16,10 @@
 //! `∂L/∂t_c = ∂L/∂t`.
 
 use cpose_core::checkpoint::{Reader, Writer};
+use cpose_core::eval::Sim3;
 use cpose_core::nn::{Adam, ExponentialDecay};
+use cpose_core::pose_field::saved::SavedPoseField;
+use cpose_core::{FieldContext, TimeRange};
 use cpose_core::{Order, ParamKind, PoseBatch, PoseField};
 use nalgebra::{Isometry3, Quaternion, UnitQuaternion, Vector3};
 
@@ -286,6 +289,35 @@ pub fn correction_cotangent(
         grad_q * init.rotation.conjugate().into_inner() + g_rot,
         *grad_t,
     )
+}
+
+/// Saves the cameras `C(t) ∘ init(t)` of a trained correction as one pose field at `path`, for
+/// `cpose query`: a `composed` field of the correction (`table`, the registry's `kind` and
+/// settings, and its flat parameters) and `init`, the initial poses at `times`, as a `discrete`
+/// field (exact at those times up to its `f32` parameters, about 1e-4 of the scene's size;
+/// between them, their se(3) tangents are interpolated), expressed in `frame`.
+pub fn save_corrected_field(
+    path: &std::path::Path,
+    (table, mut params): (&str, Vec<f32>),
+    times: &[f64],
+    init: &[Isometry3<f64>],
+    frame: Sim3,
+) -> anyhow::Result<()> {
+    let discrete = cpose_core::DiscretePoses::<f32>::from_poses(times, init)?;
+    params.extend(cpose_core::pose_field::params_to_vec(&discrete));
+    let saved = SavedPoseField {
+        config: format!(
+            "[field]\nkind = \"composed\"\n[field.a]\n{table}[field.b]\nkind = \"discrete\"\n"
+        ),
+        context: FieldContext {
+            time_range: TimeRange::new(times[0], times[times.len() - 1])?,
+            frame_times_secs: times.to_vec(),
+            seed: 0,
+        },
+        frame,
+        params,
+    };
+    saved.write(path)
 }
 
 #[cfg(test)]

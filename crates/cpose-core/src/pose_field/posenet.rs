@@ -108,6 +108,13 @@ impl PoseNetConfig {
     /// The `[posenet]` table at the defaults, commented, for tasks' default configs.
     pub const DEFAULT_TABLE: &str = include_str!("../../defaults/posenet.toml");
 
+    /// These settings as a pose-field table (`kind = "posenet"` and every key), as the registry
+    /// reads it: what a saved field records ([`crate::pose_field::saved`]).
+    pub fn field_table(&self) -> String {
+        let keys = toml::to_string(self).expect("PoseNet's settings serialise to TOML");
+        format!("kind = \"posenet\"\n{keys}")
+    }
+
     /// The settings of a config table (defaults when it is absent), the seed offset by the
     /// run's `seed`.
     pub fn from_section(

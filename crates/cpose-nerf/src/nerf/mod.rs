@@ -69,13 +69,12 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use cpose_core::eval::{ReflectionFix, Sim3, Trajectory, barf_pose_errors, write_tum};
+use cpose_core::eval::{ReflectionFix, Trajectory, barf_pose_errors, write_tum};
 use cpose_core::nn::ExponentialDecay;
 use cpose_core::plot;
-use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
-use cpose_core::{Config, FieldContext, PoseField, PoseNetConfig, RunConfig, TimeRange};
+use cpose_core::{Config, PoseField, PoseNetConfig, RunConfig, TimeRange};
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -296,7 +295,7 @@ fn correction(
         Method::TruePoses | Method::Fixed => None,
         Method::Posenet => {
             let config = posenet.context("[posenet] is decoded when PoseNet runs")?;
-            let table = format!("kind = \"posenet\"\n{}", toml::to_string(config)?);
+            let table = config.field_table();
             Some((Box::new(config.init::<f32>(range)?), table))
         }
         Method::Barf => Some((
@@ -317,31 +316,6 @@ fn correction(
             Some((Box::new(config.init::<f32>(range, times)?), table))
         }
     })
-}
-
-/// Saves the cameras `C(t) ∘ init(t)` of a trained correction as one pose field, in the frame
-/// of `traj_<condition>_<method>.txt` (`frame`, the Procrustes alignment to the truth): a
-/// `composed` field of the correction (`table`) and the initial poses as a `discrete` field (exact
-/// at the frame times up to its `f32` parameters, about 1e-4 of the scene's size; between them,
-/// their se(3) tangents are interpolated).
-fn save_field(unit: &Unit, poses: &FramePoses, table: &str, frame: Sim3) -> anyhow::Result<()> {
-    let times = poses.times();
-    let init = cpose_core::DiscretePoses::<f32>::from_poses(times, poses.initial())?;
-    let mut params = poses.params();
-    params.extend(cpose_core::pose_field::params_to_vec(&init));
-    let saved = SavedPoseField {
-        config: format!(
-            "[field]\nkind = \"composed\"\n[field.a]\n{table}[field.b]\nkind = \"discrete\"\n"
-        ),
-        context: FieldContext {
-            time_range: TimeRange::new(times[0], times[times.len() - 1])?,
-            frame_times_secs: times.to_vec(),
-            seed: 0,
-        },
-        frame,
-        params,
-    };
-    saved.write(&unit.file("field", "safetensors"))
 }
 
 /// The whole config, decoded and checked: every table, before any data is read.
@@ -721,7 +695,14 @@ fn evaluate(
     };
     write_trajectory(unit.file("traj", "txt"), &views.train_times, &aligned)?;
     if let Some(table) = correction_table {
-        save_field(unit, poses, table, errors.alignment.to_sim3())?;
+        // In the frame of `traj_<condition>_<method>.txt`, the Procrustes alignment to the truth.
+        crate::poses::save_corrected_field(
+            &unit.file("field", "safetensors"),
+            (table, poses.params()),
+            poses.times(),
+            poses.initial(),
+            errors.alignment.to_sim3(),
+        )?;
     }
     if let Some(export) = &views.export {
         export.write(unit, estimate)?;
