@@ -2,8 +2,10 @@
 //! synthetic room (generated on first use), once per tracking method: NICE-SLAM's free pose
 //! (`baseline`), PoseNet relative to the previous camera (`prev`), the first camera (`world`)
 //! or a randomly perturbed previous camera (`random`), and the intrinsic motion frame
-//! (`intrinsic`, two PoseNets with the DOF loss). Writes the trajectories in TUM format,
-//! the ATE (SE(3) alignment, as `cpose eval ate`), a top-down plot and a rendered view.
+//! (`intrinsic`, two PoseNets with the DOF loss). Writes the trajectories in TUM format and as
+//! pose fields for `cpose query` (`field_<condition>_<method>.safetensors`, a `discrete` field
+//! of the estimate: the trackers' PoseNets hold only the motion near their reference), the ATE
+//! (SE(3) alignment, as `cpose eval ate`), a top-down plot and a rendered view.
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -17,6 +19,7 @@ use cpose_core::eval::{
 };
 use cpose_core::geometry::rotation_angle_between;
 use cpose_core::plot;
+use cpose_core::pose_field::saved::SavedPoseField;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::study::{Metrics, Study, Unit, UnitKey};
 use cpose_core::{Config, PoseNetConfig, RunConfig, TimeRange};
@@ -705,6 +708,10 @@ pub fn run_methods(
             let wall_s = unit.wall_secs();
             let all = Trajectory::new(times.clone(), slam.estimates.clone())?;
             write_tum(unit.file("traj", "txt"), &all)?;
+            // Tracking holds PoseNet relative to a recent reference only: the run's whole
+            // continuous path is its estimate, saved as a discrete field for `cpose query`.
+            SavedPoseField::discrete(&times, &slam.estimates)?
+                .write(&unit.file("field", "safetensors"))?;
             let plot = unit.file("trajectory", "png");
             let scored = match &gt {
                 Some(gt) => {

@@ -125,6 +125,23 @@ impl SavedPoseField {
         })
     }
 
+    /// A trajectory as a `discrete` field: `world_from_body` at `times` (exact there up to its
+    /// `f32` parameters; between them the poses' se(3) tangents are interpolated), in the world
+    /// frame. What a run that tracks frame by frame saves of its estimate.
+    pub fn discrete(times: &[f64], world_from_body: &[Isometry3<f64>]) -> anyhow::Result<Self> {
+        let field = super::DiscretePoses::<f32>::from_poses(times, world_from_body)?;
+        Ok(Self {
+            config: "[field]\nkind = \"discrete\"\n".to_owned(),
+            context: FieldContext {
+                time_range: TimeRange::new(times[0], times[times.len() - 1])?,
+                frame_times_secs: times.to_vec(),
+                seed: 0,
+            },
+            frame: Sim3::identity(),
+            params: params_to_vec(&field),
+        })
+    }
+
     /// Writes the safetensors file, atomically.
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
         let TimeRange {
