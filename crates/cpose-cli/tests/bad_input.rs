@@ -1964,6 +1964,24 @@ fn task_configs() {
             expect: &["[data] path: the LLFF scene folder is required for source = \"llff\""],
         },
         Case {
+            name: "nerf: llff folder that does not exist",
+            files: &[],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"llff\"",
+                "--set",
+                "data.path=\"nowhere\"",
+            ],
+            code: 1,
+            expect: &[
+                "no LLFF scene at nowhere",
+                "nerf_llff_data",
+                "Set data.path to it",
+            ],
+        },
+        Case {
             name: "nerf: colmap image without its photo",
             files: &[
                 ("sparse/0/cameras.txt", T(COLMAP_CAMERAS)),

@@ -488,6 +488,32 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
             d.source.name().to_lowercase()
         );
     };
+    if !path.exists() {
+        let origin = match d.source {
+            Source::Llff => {
+                "LLFF's forward-facing scenes (poses_bounds.npy, images_N/) come from the NeRF \
+                 authors' nerf_llff_data release; fern ships in ../shared/data/llff/fern"
+            }
+            Source::Blender => {
+                "NeRF-synthetic scenes (transforms_<split>.json and their PNGs) come from the NeRF \
+                 authors' nerf_synthetic release; lego ships in ../shared/data/nerf_synthetic/lego"
+            }
+            Source::Colmap => {
+                "a COLMAP capture is the folder COLMAP reconstructs into: the photos in images/, \
+                 the sparse model in sparse/0/ (colmap automatic_reconstructor --workspace_path \
+                 DIR --image_path DIR/images)"
+            }
+            _ => {
+                "nerfstudio's transforms.json is what ns-process-data images|video writes for \
+                 your photos or video"
+            }
+        };
+        bail!(
+            "[data] path: no {} scene at {}: {origin}. Set data.path to it",
+            d.source.name(),
+            path.display()
+        );
+    }
     let forward_facing = matches!(d.source, Source::Llff | Source::Colmap);
     if forward_facing && (d.sequence || d.eval_split.is_some() || d.split != "train") {
         bail!(
