@@ -4975,7 +4975,10 @@ fn eventnerf_folders() {
             files: &[EVENTS_X, ("scene", T("not a folder\n"))],
             args: RUN_X,
             code: 1,
-            expect: &["cannot read scene/train/pose: Not a directory"],
+            expect: &[
+                "[data] path: no EventNeRF scene folder at scene",
+                "Set data.path",
+            ],
         },
         Case {
             name: "data: no such split",

@@ -396,6 +396,14 @@ fn eventnerf_recording(exp: &Experiment) -> anyhow::Result<Recording> {
     let Some(path) = &exp.data.path else {
         bail!("[data] path: the EventNeRF scene folder is required for source = \"eventnerf\"");
     };
+    if !path.is_dir() {
+        bail!(
+            "[data] path: no EventNeRF scene folder at {}: EventNeRF's scenes (train/ and val/ with \
+             pose/, intrinsics/, rgb/ and the events) come from the EventNeRF authors' data \
+             release. Set data.path to a scene folder",
+            path.display()
+        );
+    }
     let options = EventNerfOptions {
         split: exp.data.split.clone(),
         ..EventNerfOptions::default()

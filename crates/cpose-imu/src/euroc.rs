@@ -70,6 +70,21 @@ pub struct EurocSequence {
 }
 
 impl EurocSequence {
+    /// An error naming `key` and where EuRoC flights come from when `dir` is not a folder: the
+    /// message for a config whose path points nowhere.
+    pub fn check_folder(dir: &Path, key: &str) -> anyhow::Result<()> {
+        if !dir.is_dir() {
+            anyhow::bail!(
+                "{key}: no EuRoC flight folder at {}: the EuRoC MAV flights (ASL format: mav0/ with \
+                 state_groundtruth_estimate0/, imu0/, cam0/) come from ETH Zurich's EuRoC MAV \
+                 dataset; an excerpt of V1_02 ships in ../shared/data/euroc/V1_02_excerpt. Set \
+                 {key} to a flight's folder",
+                dir.display()
+            );
+        }
+        Ok(())
+    }
+
     /// Loads a sequence from its folder (the one holding `mav0/`, or `mav0/` itself).
     pub fn load(dir: &Path) -> Result<Self, DataError> {
         let mav0 = if dir.join("mav0").is_dir() {

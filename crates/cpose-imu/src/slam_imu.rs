@@ -219,6 +219,7 @@ fn euroc_room(
     if room.trajectory.is_some() {
         bail!("[synthetic] trajectory cannot be combined with [euroc]: the flight is the motion");
     }
+    EurocSequence::check_folder(&config.path, "euroc.path")?;
     let seq = EurocSequence::load(&config.path)?;
     let gt = &seq.ground_truth;
     if gt.len() < 2 || seq.imu.len() < 2 {

@@ -324,6 +324,7 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
             }
         }
         Source::Euroc => {
+            EurocSequence::check_folder(path()?, "data.path")?;
             let seq = EurocSequence::load(path()?)?;
             let origin = seq.ground_truth[0].stamp;
             let times: Vec<f64> = seq

@@ -307,8 +307,28 @@ pub fn open_sequence(
             }
             read_replica(&d.path, None, d.resolution, d.frame_rate)?
         }
-        Source::Scannet => read_scannet(&d.path, d.resolution)?,
-        Source::Tum => read_tum_rgbd(&d.path, None, d.resolution)?,
+        Source::Scannet => {
+            if !d.path.is_dir() {
+                bail!(
+                    "no ScanNet scene at {}: ScanNet (a scene exported by its SensReader into \
+                     color/, depth/, pose/ and intrinsic/) is downloaded from the ScanNet project \
+                     after accepting its terms of use. Set data.path to the scene folder",
+                    d.path.display()
+                );
+            }
+            read_scannet(&d.path, d.resolution)?
+        }
+        Source::Tum => {
+            if !d.path.is_dir() {
+                bail!(
+                    "no TUM RGB-D sequence at {}: the TUM RGB-D benchmark's sequences (rgb.txt, \
+                     depth.txt, groundtruth.txt, rgb/, depth/) are downloaded from TU Munich's \
+                     RGB-D SLAM dataset page. Set data.path to the sequence folder",
+                    d.path.display()
+                );
+            }
+            read_tum_rgbd(&d.path, None, d.resolution)?
+        }
         Source::SevenScenes => {
             if !d.path.is_dir() {
                 bail!(
