@@ -14,9 +14,13 @@
 //! along the measured specific force is observable without the orientation: `b_a = (|f̄| − g) f̄ /
 //! |f̄|` (the rest of it is indistinguishable from a tilt).
 
+use anyhow::Context as _;
+use cpose_core::geometry::GRAVITY_M_S2;
 use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
-use crate::euroc::{ImuNoise, RawImuSample};
+use crate::ImuSample;
+use crate::euroc::{EurocSequence, ImuNoise, RawImuSample};
 
 /// Length of the windows the rest test looks at, seconds.
 pub const WINDOW_SECS: f64 = 0.25;
@@ -36,6 +40,82 @@ pub struct RestBias {
     pub rest_secs: f64,
     /// Readings averaged.
     pub readings: usize,
+}
+
+/// How a real recording's IMU bias is removed (`bias` in the configs that read EuRoC).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BiasRemoval {
+    /// Minus the biases estimated over the recording's stationary start ([`bias_at_rest`]).
+    #[default]
+    Estimate,
+    /// Minus the ground-truth state's estimate nearest each reading (an ablation: no user has
+    /// it).
+    GroundTruth,
+    /// As measured.
+    Raw,
+}
+
+/// The readings of `seq` in the body frame, on the ground truth's clock (seconds since its first
+/// state), with the bias removed as `removal` says; for [`BiasRemoval::Estimate`] also a line for
+/// the log comparing the estimate with the ground truth's. Errors when the estimate is asked for
+/// and the recording does not start at rest.
+pub fn body_readings(
+    seq: &EurocSequence,
+    removal: BiasRemoval,
+) -> anyhow::Result<(Vec<ImuSample>, Option<String>)> {
+    let gt = &seq.ground_truth;
+    let origin = gt[0].stamp;
+    let gt_times: Vec<f64> = gt.iter().map(|s| s.stamp.secs_since(origin)).collect();
+    let rest = match removal {
+        BiasRemoval::Estimate => Some(
+            bias_at_rest(&seq.imu, &seq.imu_noise, GRAVITY_M_S2).with_context(|| {
+                format!(
+                    "bias = \"estimate\" needs the recording to start at rest (its first \
+                     {WINDOW_SECS} s as quiet as the IMU's noise); use bias = \"raw\" or \
+                     \"ground_truth\""
+                )
+            })?,
+        ),
+        BiasRemoval::GroundTruth | BiasRemoval::Raw => None,
+    };
+    let note = rest.map(|rest| {
+        format!(
+            "IMU bias estimated over the first {:.2} s at rest ({} readings): gyroscope {:.4?} \
+             rad/s, {:.4} rad/s from the ground truth's {:.4?}; accelerometer along gravity \
+             {:.3?} m/s² (the ground truth's {:.3?})",
+            rest.rest_secs,
+            rest.readings,
+            rest.gyro.as_slice(),
+            (rest.gyro - gt[0].gyro_bias).norm(),
+            gt[0].gyro_bias.as_slice(),
+            rest.accel.as_slice(),
+            gt[0].accel_bias.as_slice(),
+        )
+    });
+    // EuRoC's imu0 is the body frame (T_BS = I); a lever arm is not modelled.
+    let imu_rotation = seq.body_from_imu.rotation;
+    let readings = seq
+        .imu
+        .iter()
+        .map(|s| {
+            let t = s.stamp.secs_since(origin);
+            let (gyro, accel) = match &rest {
+                Some(rest) => (s.gyro - rest.gyro, s.accel - rest.accel),
+                None if removal == BiasRemoval::Raw => (s.gyro, s.accel),
+                None => {
+                    let k = gt_times.partition_point(|&x| x < t).min(gt.len() - 1);
+                    (s.gyro - gt[k].gyro_bias, s.accel - gt[k].accel_bias)
+                }
+            };
+            ImuSample {
+                t_secs: t,
+                gyro: imu_rotation * gyro,
+                accel: imu_rotation * accel,
+            }
+        })
+        .collect();
+    Ok((readings, note))
 }
 
 /// The biases over the stationary start of `imu` (sorted by time), with the noise densities

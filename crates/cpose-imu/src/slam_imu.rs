@@ -18,7 +18,6 @@
 use std::path::PathBuf;
 
 use anyhow::{Context as _, bail};
-use cpose_core::geometry::GRAVITY_M_S2;
 use cpose_core::registry::{Task, TaskInput};
 use cpose_core::{Config, RunConfig, gravity_world};
 use cpose_slam::data::{RgbdSequence, read_replica};
@@ -33,7 +32,7 @@ use cpose_slam::track::{FreePose, PoseModel, PoseNetTrackConfig, PoseNetTracker,
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::bias::bias_at_rest;
+use crate::bias::{BiasRemoval, body_readings};
 use crate::euroc::EurocSequence;
 use crate::sim::{NoiseModel, imu_from_poses};
 use crate::tracker::{ImuPoseNet, ImuTrackConfig, RelativeImu};
@@ -84,10 +83,10 @@ struct EurocConfig {
     /// The sequence folder (holding `mav0/`).
     path: PathBuf,
     /// `"estimate"` (default): readings minus the biases estimated over the flight's stationary
-    /// start ([`bias_at_rest`]); `"ground_truth"`: minus the ground-truth state's estimate (an
+    /// start ([`crate::bias::bias_at_rest`]); `"ground_truth"`: minus the ground-truth state's estimate (an
     /// ablation: no user has it); `"raw"`: as measured.
     #[serde(default)]
-    bias: Bias,
+    bias: BiasRemoval,
     /// Longest allowed gap between readings while the frames run, seconds.
     #[serde(default = "default_max_gap")]
     max_gap_secs: f64,
@@ -95,15 +94,6 @@ struct EurocConfig {
 
 fn default_max_gap() -> f64 {
     0.05
-}
-
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "snake_case")]
-enum Bias {
-    #[default]
-    Estimate,
-    GroundTruth,
-    Raw,
 }
 
 /// The IMU simulated from a sequence's ground truth (without `[euroc]`).
@@ -291,53 +281,17 @@ fn euroc_room(
         clearance
     ));
     let rgbd = read_replica(&data.path, None, data.resolution, room.frame_rate)?;
-    let rest = match config.bias {
-        Bias::Estimate => {
-            let rest = bias_at_rest(&seq.imu, &seq.imu_noise, GRAVITY_M_S2).with_context(|| {
-                format!(
-                    "{}: bias = \"estimate\" needs the recording to start at rest (its first {} \
-                     s as quiet as the IMU's noise); use bias = \"raw\" or \"ground_truth\"",
-                    config.path.display(),
-                    crate::bias::WINDOW_SECS
-                )
-            })?;
-            let truth = gt[0].gyro_bias;
-            input.run_dir.log(format_args!(
-                "IMU bias estimated over the first {:.2} s at rest ({} readings): gyroscope \
-                 {:.4?} rad/s, {:.4} rad/s from the ground truth's {:.4?}; accelerometer along \
-                 gravity {:.3?} m/s² (the ground truth's {:.3?})",
-                rest.rest_secs,
-                rest.readings,
-                rest.gyro.as_slice(),
-                (rest.gyro - truth).norm(),
-                truth.as_slice(),
-                rest.accel.as_slice(),
-                gt[0].accel_bias.as_slice(),
-            ));
-            Some(rest)
-        }
-        Bias::GroundTruth | Bias::Raw => None,
-    };
-    // Readings on the frames' clock, in the body frame.
-    let imu_rotation = seq.body_from_imu.rotation;
-    let imu: Vec<ImuSample> = seq
-        .imu
-        .iter()
-        .map(|s| {
-            let t = s.stamp.secs_since(origin);
-            let (gyro, accel) = match (config.bias, &rest) {
-                (Bias::Estimate, Some(rest)) => (s.gyro - rest.gyro, s.accel - rest.accel),
-                (Bias::Raw | Bias::Estimate, _) => (s.gyro, s.accel),
-                (Bias::GroundTruth, _) => {
-                    let k = gt_times.partition_point(|&x| x < t).min(gt.len() - 1);
-                    (s.gyro - gt[k].gyro_bias, s.accel - gt[k].accel_bias)
-                }
-            };
-            ImuSample {
-                t_secs: t - start,
-                gyro: imu_rotation * gyro,
-                accel: imu_rotation * accel,
-            }
+    let (readings, note) = body_readings(&seq, config.bias)
+        .with_context(|| format!("{}", config.path.display()))?;
+    if let Some(note) = note {
+        input.run_dir.log(note);
+    }
+    // On the frames' clock.
+    let imu: Vec<ImuSample> = readings
+        .into_iter()
+        .map(|s| ImuSample {
+            t_secs: s.t_secs - start,
+            ..s
         })
         .collect();
     check_coverage(

@@ -3,7 +3,8 @@
 //! and the accelerometer (through `p̈`), and report the pose error at every held-out timestamp.
 //!
 //! Sources: a built-in synthetic hand-held motion (exact IMU from its analytic derivatives), a
-//! TUM trajectory file, or a EuRoC sequence (real IMU, ground-truth biases removed). Every pose
+//! TUM trajectory file, or a EuRoC sequence (real IMU, the bias estimated over the flight's
+//! stationary start removed; `[data] bias`). Every pose
 //! field named in `[fields.NAME]` is fitted once per IMU mode; slerp/linear interpolation of the
 //! known poses is the reference (`interp`).
 //!
@@ -33,6 +34,7 @@ use cpose_core::{Order, PoseBatch, PoseField, TimeRange};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::bias::{BiasRemoval, body_readings};
 use crate::euroc::EurocSequence;
 use crate::{ImuMode, ImuSample};
 use cpose_core::gravity_world;
@@ -99,6 +101,10 @@ struct DataConfig {
     /// Keep every N-th pose as supervision; the others are held out (default 20).
     #[serde(default = "default_known_every")]
     known_every: usize,
+    /// EuRoC only: how the IMU bias is removed, `"estimate"` (default, from the flight's
+    /// stationary start), `"ground_truth"` (an ablation) or `"raw"` ([`BiasRemoval`]).
+    #[serde(default)]
+    bias: BiasRemoval,
 }
 
 impl DataConfig {
@@ -244,6 +250,8 @@ impl FitConfig {
 
 /// A trajectory cropped to the fitted range, times in seconds since its first known pose.
 struct Sequence {
+    /// What loading found worth a line in the log.
+    note: Option<String>,
     /// Absolute time of `t = 0` (for TUM output).
     origin_secs: f64,
     times: Vec<f64>,
@@ -261,6 +269,8 @@ struct Loaded {
     times: Vec<f64>,
     poses: Vec<Isometry3<f64>>,
     imu: Vec<ImuSample>,
+    /// What loading found worth a line in the log (the estimated IMU bias).
+    note: Option<String>,
 }
 
 fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded> {
@@ -306,6 +316,7 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
                 times,
                 poses,
                 imu,
+                note: None,
             }
         }
         Source::Tum => {
@@ -321,11 +332,13 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
                 times,
                 poses: trajectory.poses().to_vec(),
                 imu: Vec::new(),
+                note: None,
             }
         }
         Source::Euroc => {
-            EurocSequence::check_folder(path()?, "data.path")?;
-            let seq = EurocSequence::load(path()?)?;
+            let folder = path()?;
+            EurocSequence::check_folder(folder, "data.path")?;
+            let seq = EurocSequence::load(folder)?;
             let origin = seq.ground_truth[0].stamp;
             let times: Vec<f64> = seq
                 .ground_truth
@@ -333,28 +346,14 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
                 .map(|s| s.stamp.secs_since(origin))
                 .collect();
             let poses = seq.ground_truth.iter().map(|s| s.world_from_body).collect();
-            // Remove the ground-truth bias of the nearest state and express the readings in the
-            // body frame (EuRoC's imu0 is the body frame: T_BS = I; a lever arm is not modelled).
-            let imu_rotation = seq.body_from_imu.rotation;
-            let imu = seq
-                .imu
-                .iter()
-                .map(|s| {
-                    let t = s.stamp.secs_since(origin);
-                    let k = times.partition_point(|&x| x < t).min(times.len() - 1);
-                    let state = &seq.ground_truth[k];
-                    ImuSample {
-                        t_secs: t,
-                        gyro: imu_rotation * (s.gyro - state.gyro_bias),
-                        accel: imu_rotation * (s.accel - state.accel_bias),
-                    }
-                })
-                .collect();
+            let (imu, note) = body_readings(&seq, data.bias)
+                .with_context(|| format!("{}", folder.display()))?;
             Loaded {
                 origin_secs: origin.as_secs_f64(),
                 times,
                 poses,
                 imu,
+                note,
             }
         }
     })
@@ -373,6 +372,7 @@ impl Sequence {
             times,
             poses,
             imu,
+            note,
         } = load(config, data, seed)?;
         let start = data.start_secs;
         let end = data.crop_secs.map_or(f64::INFINITY, |c| start + c);
@@ -393,6 +393,7 @@ impl Sequence {
         let t1 = times[keep[keep.len() - 1]];
         let known: Vec<usize> = (0..keep.len()).step_by(data.known_every).collect();
         Ok(Self {
+            note,
             origin_secs: origin + t0,
             times: keep.iter().map(|&i| times[i] - t0).collect(),
             poses: keep.iter().map(|&i| poses[i]).collect(),
@@ -729,6 +730,9 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     let seed = input.run.seed;
     let Settings { exp, fitted } = Settings::new(config)?;
     let seq = Sequence::new(config, &exp.data, seed)?;
+    if let Some(note) = &seq.note {
+        input.run_dir.log(note);
+    }
     if seq.imu.is_empty() && exp.fit.imu.iter().any(|m| *m != ImuMode::None) {
         bail!(
             "{}: [fit] imu = {:?} needs IMU data, but source {:?} has none; use imu = [\"none\"]",
@@ -904,6 +908,7 @@ mod tests {
             start_secs: 0.5,
             crop_secs: Some(3.0),
             known_every,
+            bias: BiasRemoval::Estimate,
         };
         (config, data)
     }
