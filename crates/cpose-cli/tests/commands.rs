@@ -1013,38 +1013,24 @@ fn nerf_refines_a_users_capture_and_writes_the_poses_back() {
     });
     write(&scene, "transforms.json", &transforms.to_string());
 
-    let config = workspace_root().join("configs/colmap_capture.toml");
     for source in ["colmap", "nerfstudio"] {
-        let out_dir = format!("run-{source}");
-        let mut args = vec![
-            "run",
-            config.to_str().expect("utf-8"),
-            "--out",
-            &out_dir,
-            "-q",
-        ];
-        let source_setting = format!("data.source=\"{source}\"");
-        for setting in [
-            &source_setting,
-            "data.path=\"capture\"",
-            "data.factor=1",
-            "train.methods=[\"true_poses\", \"barf\"]",
-            "train.iterations=20",
-            "train.rays_per_step=64",
-            "render.samples=8",
-            "eval.refine_iterations=0",
-            "eval.saved_views=0",
-            "run.threads=1",
-        ] {
-            args.extend(["--set", setting]);
-        }
-        let out = cpose_in(&dir, &args);
-        assert!(
-            out.status.success(),
-            "{source}: {}",
-            String::from_utf8_lossy(&out.stderr)
+        let run = run_config_in(
+            &dir,
+            "configs/colmap_capture.toml",
+            &format!("run-{source}"),
+            &[
+                &format!("data.source=\"{source}\""),
+                "data.path=\"capture\"",
+                "data.factor=1",
+                "train.methods=[\"true_poses\", \"barf\"]",
+                "train.iterations=20",
+                "train.rays_per_step=64",
+                "render.samples=8",
+                "eval.refine_iterations=0",
+                "eval.saved_views=0",
+                "run.threads=1",
+            ],
         );
-        let run = dir.join(&out_dir);
         let log = std::fs::read_to_string(run.join("log.txt")).expect("log.txt");
         // Five trained on (the last held out), in name order, with their names.
         let exported = |method: &str| -> Vec<(String, Isometry3<f64>)> {
@@ -1476,35 +1462,47 @@ fn assert_query_reproduces(dir: &Path, field: &Path, traj: &Path, tolerance: (f6
     }
 }
 
+/// Runs `cpose run CONFIG --out OUT -q --set …` in `dir` and asserts that it succeeds; returns the
+/// run folder.
+fn run_config_in(dir: &Path, config: &str, out: &str, settings: &[&str]) -> PathBuf {
+    let config = workspace_root().join(config);
+    let mut args = vec!["run", config.to_str().expect("utf-8"), "--out", out, "-q"];
+    for setting in settings {
+        args.extend(["--set", setting]);
+    }
+    let run = cpose_in(dir, &args);
+    assert!(
+        run.status.success(),
+        "{}: {}",
+        config.display(),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    dir.join(out)
+}
+
 /// `events` saves PoseNet's camera path over the whole recording: `cpose query` at the
 /// evaluation times gives its trajectory file.
 #[test]
 fn events_saves_posenets_path_and_query_reproduces_it() {
     let dir = temp_dir("query-events");
-    let config = workspace_root().join("configs/events_interp.toml");
-    let mut args = vec!["run", config.to_str().expect("utf-8"), "--out", "run", "-q"];
-    for setting in [
-        "simulation.width=24",
-        "simulation.height=18",
-        "simulation.render_steps=40",
-        "simulation.held_out_views=1",
-        "experiment.known_poses=[6]",
-        "train.iterations=20",
-        "train.rays_per_step=64",
-        "train.windows_per_step=2",
-        "render.samples=12",
-        "eval.pose_samples=10",
-        "run.threads=1",
-    ] {
-        args.extend(["--set", setting]);
-    }
-    let out = cpose_in(&dir, &args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let run = run_config_in(
+        &dir,
+        "configs/events_interp.toml",
+        "run",
+        &[
+            "simulation.width=24",
+            "simulation.height=18",
+            "simulation.render_steps=40",
+            "simulation.held_out_views=1",
+            "experiment.known_poses=[6]",
+            "train.iterations=20",
+            "train.rays_per_step=64",
+            "train.windows_per_step=2",
+            "render.samples=12",
+            "eval.pose_samples=10",
+            "run.threads=1",
+        ],
     );
-    let run = dir.join("run");
     assert_query_reproduces(
         &dir,
         &run.join("field_K6_posenet.safetensors"),
@@ -1519,37 +1517,24 @@ fn events_saves_posenets_path_and_query_reproduces_it() {
 #[test]
 fn nerf_saves_its_cameras_and_query_reproduces_them() {
     let dir = temp_dir("query-nerf");
-    let config = workspace_root().join("configs/nerf_synthetic.toml");
-    let mut args = vec![
+    let run = run_config_in(
+        &dir,
+        "configs/nerf_synthetic.toml",
         "run",
-        config.to_str().unwrap(),
-        "--out",
-        "run",
-        "-q",
-        "--set",
-        "train.methods=[\"posenet\", \"barf\", \"spline\"]",
-    ];
-    for setting in [
-        "train.iterations=40",
-        "train.rays_per_step=64",
-        "render.samples=12",
-        "eval.refine_iterations=0",
-        "data.test_views=1",
-        "eval.saved_views=0",
-        "data.width=16",
-        "data.height=16",
-        "orbit.frames=10",
-        "run.threads=1",
-    ] {
-        args.extend(["--set", setting]);
-    }
-    let out = cpose_in(&dir, &args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        &[
+            "train.methods=[\"posenet\", \"barf\", \"spline\"]",
+            "train.iterations=40",
+            "train.rays_per_step=64",
+            "render.samples=12",
+            "eval.refine_iterations=0",
+            "data.test_views=1",
+            "eval.saved_views=0",
+            "data.width=16",
+            "data.height=16",
+            "orbit.frames=10",
+            "run.threads=1",
+        ],
     );
-    let run = dir.join("run");
     // Parameters are f32: the initial poses' tangents keep about 1e-4 of the orbit's radius of
     // 4.5 (measured: at most 2.1e-4 for PoseNet, 1.2e-5 rad in rotation).
     for method in ["posenet", "barf", "spline"] {

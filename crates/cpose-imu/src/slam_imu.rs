@@ -281,8 +281,8 @@ fn euroc_room(
         clearance
     ));
     let rgbd = read_replica(&data.path, None, data.resolution, room.frame_rate)?;
-    let (readings, note) = body_readings(&seq, config.bias)
-        .with_context(|| format!("{}", config.path.display()))?;
+    let (readings, note) =
+        body_readings(&seq, config.bias).with_context(|| format!("{}", config.path.display()))?;
     if let Some(note) = note {
         input.run_dir.log(note);
     }

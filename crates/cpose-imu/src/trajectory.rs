@@ -346,8 +346,8 @@ fn load(config: &Config, data: &DataConfig, seed: u64) -> anyhow::Result<Loaded>
                 .map(|s| s.stamp.secs_since(origin))
                 .collect();
             let poses = seq.ground_truth.iter().map(|s| s.world_from_body).collect();
-            let (imu, note) = body_readings(&seq, data.bias)
-                .with_context(|| format!("{}", folder.display()))?;
+            let (imu, note) =
+                body_readings(&seq, data.bias).with_context(|| format!("{}", folder.display()))?;
             Loaded {
                 origin_secs: origin.as_secs_f64(),
                 times,

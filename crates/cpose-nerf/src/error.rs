@@ -115,3 +115,18 @@ pub enum DataError {
         error: io::Error,
     },
 }
+
+impl DataError {
+    /// [`DataError::Format`]: `path`'s content is not `expected`, it is `found`.
+    pub fn format(
+        path: &std::path::Path,
+        expected: impl Into<String>,
+        found: impl Into<String>,
+    ) -> Self {
+        DataError::Format {
+            path: path.to_path_buf(),
+            expected: expected.into(),
+            found: found.into(),
+        }
+    }
+}

@@ -272,14 +272,6 @@ const CAMERAS: &str = "cameras";
 const IMAGES: &str = "images";
 const POINTS: &str = "points3D";
 
-fn format_err(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> DataError {
-    DataError::Format {
-        path: path.to_path_buf(),
-        expected: expected.into(),
-        found: found.into(),
-    }
-}
-
 /// Which file of part `stem` the folder has: `.bin` if it exists, else `.txt`, else none.
 fn find_part(dir: &Path, stem: &str) -> Option<(PathBuf, ColmapFormat)> {
     [ColmapFormat::Binary, ColmapFormat::Text]
@@ -297,7 +289,7 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>, DataError> {
 
 fn read_text(path: &Path) -> Result<String, DataError> {
     String::from_utf8(read_bytes(path)?).map_err(|e| {
-        format_err(
+        DataError::format(
             path,
             "UTF-8 text",
             format!(
@@ -312,14 +304,14 @@ fn read_text(path: &Path) -> Result<String, DataError> {
 /// checks). `cameras` is required; a missing `images` or `points3D` file gives `None`.
 pub fn read_colmap_model(dir: &Path) -> Result<ColmapModel, DataError> {
     if !dir.is_dir() {
-        return Err(format_err(
+        return Err(DataError::format(
             dir,
             "a folder holding a COLMAP sparse model",
             "no such folder",
         ));
     }
     let Some((path, format)) = find_part(dir, CAMERAS) else {
-        return Err(format_err(
+        return Err(DataError::format(
             dir,
             "a COLMAP sparse model with cameras.bin or cameras.txt",
             "neither file",
@@ -358,7 +350,7 @@ pub fn read_colmap_model(dir: &Path) -> Result<ColmapModel, DataError> {
 fn check_camera(cam: &ColmapCamera, path: &Path, at: &str) -> Result<(), DataError> {
     for (side, value) in [("width", cam.width), ("height", cam.height)] {
         if !(1..=MAX_IMAGE_SIDE).contains(&value) {
-            return Err(format_err(
+            return Err(DataError::format(
                 path,
                 format!("{at}: an image {side} in 1..={MAX_IMAGE_SIDE}"),
                 value.to_string(),
@@ -367,7 +359,7 @@ fn check_camera(cam: &ColmapCamera, path: &Path, at: &str) -> Result<(), DataErr
     }
     let model = cam.model;
     if cam.params.len() != model.num_params() {
-        return Err(format_err(
+        return Err(DataError::format(
             path,
             format!(
                 "{at}: {} parameters for {} ({})",
@@ -380,7 +372,7 @@ fn check_camera(cam: &ColmapCamera, path: &Path, at: &str) -> Result<(), DataErr
     }
     for (name, value) in model.param_names().iter().zip(&cam.params) {
         if !value.is_finite() {
-            return Err(format_err(
+            return Err(DataError::format(
                 path,
                 format!("{at}: a finite parameter {name}"),
                 value.to_string(),
@@ -389,7 +381,7 @@ fn check_camera(cam: &ColmapCamera, path: &Path, at: &str) -> Result<(), DataErr
     }
     for &i in model.focal_indices() {
         if cam.params[i] <= 0.0 {
-            return Err(format_err(
+            return Err(DataError::format(
                 path,
                 format!("{at}: a positive focal length {}", model.param_names()[i]),
                 format!("{:?}", cam.params[i]),
@@ -426,7 +418,7 @@ fn accept_camera(
 }
 
 fn unsupported_model(path: &Path, at: &str, found: String) -> DataError {
-    format_err(
+    DataError::format(
         path,
         format!("{at}: a supported camera model: {}", supported_models()),
         found,
@@ -449,7 +441,7 @@ fn pose_from_disk(
     at: &str,
 ) -> Result<Isometry3<f64>, DataError> {
     if !q.iter().chain(&t).all(|v| v.is_finite()) {
-        return Err(format_err(
+        return Err(DataError::format(
             path,
             format!("{at}: a finite pose (QW QX QY QZ TX TY TZ)"),
             format!("q = {q:?}, t = {t:?}"),
@@ -459,7 +451,7 @@ fn pose_from_disk(
     let norm = quaternion.norm();
     // `norm` is not NaN (finite entries), but may overflow to infinity: rejected here.
     if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
-        return Err(format_err(
+        return Err(DataError::format(
             path,
             format!(
                 "{at}: a unit quaternion (QW QX QY QZ; norm within {QUATERNION_NORM_TOLERANCE} of 1)"
@@ -490,7 +482,7 @@ fn check_keypoint(xy: [f64; 2], path: &Path, at: &str) -> Result<(), DataError> 
     if xy.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(format_err(
+        Err(DataError::format(
             path,
             format!("{at}: finite keypoint coordinates"),
             format!("{xy:?}"),
@@ -502,7 +494,7 @@ fn check_point_values(point: &ColmapPoint, path: &Path, at: &str) -> Result<(), 
     if point.xyz.iter().all(|v| v.is_finite()) && point.error.is_finite() {
         Ok(())
     } else {
-        Err(format_err(
+        Err(DataError::format(
             path,
             format!("{at}: finite X Y Z and ERROR"),
             format!("xyz = {:?}, error = {}", point.xyz, point.error),
@@ -511,7 +503,7 @@ fn check_point_values(point: &ColmapPoint, path: &Path, at: &str) -> Result<(), 
 }
 
 fn duplicate(path: &Path, at: &str, what: &str, id: impl std::fmt::Display) -> DataError {
-    format_err(
+    DataError::format(
         path,
         format!("{at}: a {what} id not used before"),
         format!("a second {what} {id}"),
@@ -519,7 +511,7 @@ fn duplicate(path: &Path, at: &str, what: &str, id: impl std::fmt::Display) -> D
 }
 
 fn unknown_camera(path: &Path, at: &str, camera_id: u32) -> DataError {
-    format_err(
+    DataError::format(
         path,
         format!("{at}: a CAMERA_ID of the model's cameras"),
         format!("camera {camera_id}, which is not in cameras"),
@@ -556,7 +548,7 @@ impl<'a> Reader<'a> {
                 self.pos += N;
                 Ok(array)
             }
-            None => Err(format_err(
+            None => Err(DataError::format(
                 self.path,
                 format!("{} ({N} bytes at offset {})", what(), self.pos),
                 format!(
@@ -610,7 +602,7 @@ impl<'a> Reader<'a> {
             .and_then(|n| n.checked_mul(min_bytes))
             .is_some_and(|need| need <= left);
         if !fits {
-            return Err(format_err(
+            return Err(DataError::format(
                 self.path,
                 format!(
                     "the number of {} at offset {at}: at most {} ({left} bytes left, at least \
@@ -633,7 +625,7 @@ impl<'a> Reader<'a> {
                 self.pos += len + 1;
                 Ok(&rest[..len])
             }
-            None => Err(format_err(
+            None => Err(DataError::format(
                 self.path,
                 format!("{} ending in a NUL byte (from offset {})", what(), self.pos),
                 "the end of the file (truncated?)",
@@ -645,7 +637,7 @@ impl<'a> Reader<'a> {
         if self.remaining() == 0 {
             Ok(())
         } else {
-            Err(format_err(
+            Err(DataError::format(
                 self.path,
                 format!("the end of the file after {records} {what}"),
                 format!("{} more bytes", self.remaining()),
@@ -707,7 +699,7 @@ fn read_images_bin(
         let name_bytes = r.nul_terminated(&|| format!("{at}: NAME"))?;
         let name = std::str::from_utf8(name_bytes)
             .map_err(|e| {
-                format_err(
+                DataError::format(
                     path,
                     format!("{at}: a UTF-8 image name"),
                     format!(
@@ -747,7 +739,7 @@ fn point3d_id(id: i64, path: &Path, at: &str) -> Result<Option<u64>, DataError> 
     match id {
         -1 => Ok(None),
         id if id >= 0 => Ok(Some(id as u64)),
-        id => Err(format_err(
+        id => Err(DataError::format(
             path,
             format!("{at}: a POINT3D_ID ≥ 0, or −1 for none"),
             id.to_string(),
@@ -849,7 +841,7 @@ impl<'a> Fields<'a> {
 
     fn token(&mut self, what: &str) -> Result<&'a str, DataError> {
         self.next_token().ok_or_else(|| {
-            format_err(
+            DataError::format(
                 self.path,
                 format!("line {}: {what}", self.line),
                 "the end of the line",
@@ -860,7 +852,7 @@ impl<'a> Fields<'a> {
     fn parse<T: std::str::FromStr>(&mut self, what: &str, kind: &str) -> Result<T, DataError> {
         let token = self.token(what)?;
         token.parse().map_err(|_| {
-            format_err(
+            DataError::format(
                 self.path,
                 format!("line {}: {what} ({kind})", self.line),
                 format!("{token:?}"),
@@ -873,7 +865,7 @@ impl<'a> Fields<'a> {
         if value.is_finite() {
             Ok(value)
         } else {
-            Err(format_err(
+            Err(DataError::format(
                 self.path,
                 format!("line {}: {what} (a finite number)", self.line),
                 value.to_string(),
@@ -890,7 +882,7 @@ impl<'a> Fields<'a> {
         if self.rest.is_empty() {
             Ok(())
         } else {
-            Err(format_err(
+            Err(DataError::format(
                 self.path,
                 format!("line {}: the end of the line after {what}", self.line),
                 format!("{:?}", self.rest),
@@ -957,7 +949,7 @@ fn read_images_txt(
         let camera_id: u32 = f.parse("CAMERA_ID", "an integer in 0..=4294967295")?;
         let name = f.rest();
         if name.is_empty() {
-            return Err(format_err(
+            return Err(DataError::format(
                 path,
                 format!("line {line}: NAME after CAMERA_ID"),
                 "the end of the line",
@@ -1079,7 +1071,7 @@ pub fn write_colmap_model(
         .flat_map(|stem| ["bin", "txt"].map(|e| dir.join(format!("{stem}.{e}"))))
         .collect();
     if !replace && let Some(existing) = all_files.iter().find(|p| p.exists()) {
-        return Err(format_err(
+        return Err(DataError::format(
             existing,
             "no existing COLMAP model file (pass replace = true to overwrite)",
             "an existing file",
@@ -1156,7 +1148,7 @@ fn check_model(
             if let Some(id) = point_id
                 && i64::try_from(*id).is_err()
             {
-                return Err(format_err(
+                return Err(DataError::format(
                     path,
                     format!("{at}: a POINT3D_ID below 2^63 (stored as i64)"),
                     id.to_string(),
@@ -1192,7 +1184,7 @@ fn check_name(name: &str, format: ColmapFormat, path: &Path, at: &str) -> Result
              separates fields by spaces; write binary instead)"
         }
     };
-    Err(format_err(
+    Err(DataError::format(
         path,
         format!("{at}: {expected}"),
         format!("{name:?}"),

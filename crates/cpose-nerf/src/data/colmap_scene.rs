@@ -37,19 +37,14 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Point3};
 
+use super::Dataset;
+use super::capture::{NativeCamera, check_size, load_photos};
 use super::colmap::{
     CameraModel, ColmapCamera, ColmapFormat, ColmapModel, read_colmap_model, write_colmap_model,
 };
 use super::distortion::Distortion;
 use super::llff::list_images;
-use super::{Dataset, load_same_size};
 use crate::DataError;
-use crate::camera::PinholeCamera;
-use crate::image::Image;
-
-/// The most pixels of all loaded images together (a hundred million, 1.2 GB of colour); a larger
-/// capture is refused before any photo is read, naming the downscale factor that fits.
-pub const MAX_PIXELS: usize = 100_000_000;
 
 /// The quantiles of the observed point depths taken as an image's `near` and `far`, in percent.
 pub const BOUND_PERCENTILES: [f64; 2] = [0.1, 99.9];
@@ -73,14 +68,6 @@ pub struct ColmapScene {
     pub max_distortion_px: f64,
 }
 
-fn format_err(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> DataError {
-    DataError::Format {
-        path: path.to_path_buf(),
-        expected: expected.into(),
-        found: found.into(),
-    }
-}
-
 /// The model folder of `scene_dir`: `sparse/0`, else `sparse`, whichever holds a `cameras` file.
 fn find_model_dir(scene_dir: &Path) -> Result<PathBuf, DataError> {
     let candidates = [scene_dir.join("sparse").join("0"), scene_dir.join("sparse")];
@@ -89,7 +76,7 @@ fn find_model_dir(scene_dir: &Path) -> Result<PathBuf, DataError> {
         .find(|d| d.join("cameras.bin").is_file() || d.join("cameras.txt").is_file())
         .cloned()
         .ok_or_else(|| {
-            format_err(
+            DataError::format(
                 scene_dir,
                 "a COLMAP reconstruction: sparse/0/ or sparse/ holding cameras, images and \
                  points3D (.bin or .txt), and the photos in images/",
@@ -112,7 +99,7 @@ pub fn load_colmap_scene(
 ) -> Result<(Dataset, ColmapScene), DataError> {
     let scene_dir = scene_dir.as_ref();
     if factor == 0 {
-        return Err(format_err(
+        return Err(DataError::format(
             scene_dir,
             "a downscale factor of at least 1",
             "0",
@@ -127,45 +114,44 @@ pub fn load_colmap_scene(
         ColmapFormat::Text
     };
     let Some(registered) = &model.images else {
-        return Err(format_err(
+        return Err(DataError::format(
             &model_dir,
             "an images.bin or images.txt with the registered images' poses",
             "neither file",
         ));
     };
     let Some(points) = &model.points else {
-        return Err(format_err(
+        return Err(DataError::format(
             &model_dir,
             "a points3D.bin or points3D.txt (the scene's depth bounds come from its points)",
             "neither file",
         ));
     };
     if registered.is_empty() {
-        return Err(format_err(
+        return Err(DataError::format(
             &images_path(format.extension()),
             "at least one registered image",
             "none",
         ));
     }
     let camera = shared_camera(&model, &model_dir)?;
-    let pixels =
-        registered.len() as f64 * (camera.width * camera.height) as f64 / f64::from(factor).powi(2);
-    if pixels > MAX_PIXELS as f64 {
-        let fits = (pixels * f64::from(factor).powi(2) / MAX_PIXELS as f64)
-            .sqrt()
-            .ceil();
-        return Err(format_err(
-            scene_dir,
-            format!(
-                "at most {MAX_PIXELS} pixels over all images (a downscale factor of {fits} or \
-                 more for {} photos of {}×{})",
-                registered.len(),
-                camera.width,
-                camera.height
-            ),
-            format!("{pixels:.3e} pixels at factor {factor}"),
-        ));
-    }
+    let p = &camera.params;
+    let (f, centre, k) = match camera.model {
+        CameraModel::SimplePinhole => ([p[0], p[0]], [p[1], p[2]], [0.0; 3]),
+        CameraModel::Pinhole => ([p[0], p[1]], [p[2], p[3]], [0.0; 3]),
+        CameraModel::SimpleRadial => ([p[0], p[0]], [p[1], p[2]], [p[3], 0.0, 0.0]),
+        CameraModel::Radial => ([p[0], p[0]], [p[1], p[2]], [p[3], p[4], 0.0]),
+    };
+    let native = NativeCamera {
+        size: [camera.width, camera.height],
+        focal: f,
+        centre,
+        lens: Distortion {
+            radial: k,
+            tangential: [0.0; 2],
+        },
+    };
+    check_size(registered.len(), &native, factor, scene_dir)?;
 
     let mut order: Vec<usize> = (0..registered.len()).collect();
     order.sort_by(|&a, &b| registered[a].name.cmp(&registered[b].name));
@@ -178,7 +164,7 @@ pub fn load_colmap_scene(
         (scene_dir.join("images"), 1.0 / f64::from(factor))
     };
     if !folder.is_dir() {
-        return Err(format_err(
+        return Err(DataError::format(
             &folder,
             format!(
                 "the folder of the {} photos the model registers",
@@ -199,50 +185,7 @@ pub fn load_colmap_scene(
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
         .collect();
 
-    let (mut images, (width, height)) = load_same_size(&paths, &folder, |p| {
-        let image = Image::load(p)?;
-        Ok(if resize == 1.0 {
-            image
-        } else {
-            image.resized(resize)
-        })
-    })?;
-    let (w0, h0) = (camera.width as f64, camera.height as f64);
-    let (sx, sy) = (width as f64 / w0, height as f64 / h0);
-    // One pixel of rounding on either side.
-    if (width as f64 * h0 - height as f64 * w0).abs() > w0.max(h0) {
-        return Err(format_err(
-            &paths[0],
-            format!(
-                "an image of the camera's aspect ratio: {}×{} (camera {}) scaled by a common factor",
-                camera.width, camera.height, camera.id
-            ),
-            format!("{width}×{height}"),
-        ));
-    }
-    let p = &camera.params;
-    let (fx, fy, cx, cy, k) = match camera.model {
-        CameraModel::SimplePinhole => (p[0], p[0], p[1], p[2], [0.0; 3]),
-        CameraModel::Pinhole => (p[0], p[1], p[2], p[3], [0.0; 3]),
-        CameraModel::SimpleRadial => (p[0], p[0], p[1], p[2], [p[3], 0.0, 0.0]),
-        CameraModel::Radial => (p[0], p[0], p[1], p[2], [p[3], p[4], 0.0]),
-    };
-    let lens = Distortion {
-        radial: k,
-        tangential: [0.0; 2],
-    };
-    let pinhole = PinholeCamera {
-        width,
-        height,
-        fx: fx * sx,
-        fy: fy * sy,
-        cx: cx * sx,
-        cy: cy * sy,
-    };
-    for image in images.iter_mut().filter(|_| !lens.is_none()) {
-        *image = lens.undistort(image, &pinhole);
-    }
-    let max_distortion_px = lens.max_shift_px(&pinhole);
+    let (images, pinhole, max_distortion_px) = load_photos(&paths, &folder, resize, &native)?;
 
     let world_from_camera: Vec<Isometry3<f64>> = order
         .iter()
@@ -287,7 +230,7 @@ fn shared_camera(model: &ColmapModel, model_dir: &Path) -> Result<ColmapCamera, 
             && c.params == first.params
     };
     if let Some(other) = cameras.iter().find(|c| !same(c)) {
-        return Err(format_err(
+        return Err(DataError::format(
             model_dir,
             "one camera shared by every image (a single camera, as from COLMAP's \
              --ImageReader.single_camera 1)",
@@ -324,7 +267,7 @@ fn find_image(files: &[PathBuf], name: &str, folder: &Path) -> Result<PathBuf, D
         .find(|f| f.file_stem() == stem && f.parent() == parent)
         .cloned()
         .ok_or_else(|| {
-            format_err(
+            DataError::format(
                 &exact,
                 "the photo of a registered image (that name, or its stem with .png, .jpg or .jpeg)",
                 "no such file",
@@ -370,7 +313,7 @@ fn depth_bounds(
         .enumerate()
         .map(|(i, d)| {
             if d.is_empty() {
-                return Err(format_err(
+                return Err(DataError::format(
                     model_dir,
                     format!(
                         "3-D points observed in front of image {} ({}), for its depth bounds",

@@ -23,6 +23,7 @@ use crate::camera::PinholeCamera;
 use crate::image::Image;
 
 pub mod blender;
+pub mod capture;
 pub mod colmap;
 pub mod colmap_scene;
 pub mod distortion;

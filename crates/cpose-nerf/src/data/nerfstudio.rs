@@ -29,11 +29,10 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Isometry3, Matrix3, Vector3};
 use serde_json::{Map, Value};
 
+use super::capture::{NativeCamera, check_size, load_photos};
 use super::distortion::Distortion;
-use super::{Dataset, isometry_from_rt, load_same_size};
+use super::{Dataset, isometry_from_rt};
 use crate::DataError;
-use crate::camera::PinholeCamera;
-use crate::image::Image;
 
 /// The file, its parsed content and which frame each dataset image came from: what writing
 /// refined poses back needs.
@@ -50,22 +49,11 @@ pub struct NerfstudioScene {
     pub max_distortion_px: f64,
 }
 
-fn format_err(path: &Path, expected: impl Into<String>, found: impl Into<String>) -> DataError {
-    DataError::Format {
-        path: path.to_path_buf(),
-        expected: expected.into(),
-        found: found.into(),
-    }
-}
-
 /// One frame's camera, as read.
 #[derive(Clone, Debug, PartialEq)]
 struct Intrinsics {
     model: String,
-    focal: [f64; 2],
-    centre: [f64; 2],
-    size: [usize; 2],
-    lens: Distortion,
+    camera: NativeCamera,
 }
 
 /// The camera of `frame` (its own keys, else the file's).
@@ -78,10 +66,11 @@ fn intrinsics(
     let get = |key: &str| frame.get(key).or_else(|| top.get(key));
     let number = |key: &str, default: Option<f64>| -> Result<f64, DataError> {
         match get(key) {
-            None => default
-                .ok_or_else(|| format_err(path, format!("{what}: the intrinsic {key}"), "none")),
+            None => default.ok_or_else(|| {
+                DataError::format(path, format!("{what}: the intrinsic {key}"), "none")
+            }),
             Some(v) => v.as_f64().filter(|v| v.is_finite()).ok_or_else(|| {
-                format_err(
+                DataError::format(
                     path,
                     format!("{what}: a finite number {key}"),
                     v.to_string(),
@@ -94,7 +83,7 @@ fn intrinsics(
         if (1.0..=65535.0).contains(&v) && v.fract() == 0.0 {
             Ok(v as usize)
         } else {
-            Err(format_err(
+            Err(DataError::format(
                 path,
                 format!("{what}: {key} a whole number of pixels in 1..=65535"),
                 v.to_string(),
@@ -105,7 +94,7 @@ fn intrinsics(
         None => "OPENCV".to_owned(),
         Some(Value::String(s)) => s.clone(),
         Some(other) => {
-            return Err(format_err(
+            return Err(DataError::format(
                 path,
                 format!("{what}: a string camera_model"),
                 other.to_string(),
@@ -117,7 +106,7 @@ fn intrinsics(
         "PINHOLE" | "SIMPLE_PINHOLE" => Distortion::default(),
         "OPENCV" => {
             if number("k4", zero)? != 0.0 {
-                return Err(format_err(
+                return Err(DataError::format(
                     path,
                     format!("{what}: k4 = 0 for OPENCV (k4 belongs to the fisheye model)"),
                     number("k4", zero)?.to_string(),
@@ -133,7 +122,7 @@ fn intrinsics(
             }
         }
         other => {
-            return Err(format_err(
+            return Err(DataError::format(
                 path,
                 format!("{what}: camera_model PINHOLE, SIMPLE_PINHOLE or OPENCV"),
                 other.to_owned(),
@@ -142,7 +131,7 @@ fn intrinsics(
     };
     let focal = [number("fl_x", None)?, number("fl_y", None)?];
     if focal.iter().any(|f| *f <= 0.0) {
-        return Err(format_err(
+        return Err(DataError::format(
             path,
             format!("{what}: positive focal lengths fl_x, fl_y"),
             format!("{focal:?}"),
@@ -150,10 +139,12 @@ fn intrinsics(
     }
     Ok(Intrinsics {
         model,
-        focal,
-        centre: [number("cx", None)?, number("cy", None)?],
-        size: [side("w")?, side("h")?],
-        lens,
+        camera: NativeCamera {
+            size: [side("w")?, side("h")?],
+            focal,
+            centre: [number("cx", None)?, number("cy", None)?],
+            lens,
+        },
     })
 }
 
@@ -192,10 +183,11 @@ pub fn load_nerfstudio(
         path: json_path.clone(),
         error,
     })?;
-    let json: Map<String, Value> = serde_json::from_str(&text)
-        .map_err(|e| format_err(&json_path, "a JSON object", format!("a parse error: {e}")))?;
+    let json: Map<String, Value> = serde_json::from_str(&text).map_err(|e| {
+        DataError::format(&json_path, "a JSON object", format!("a parse error: {e}"))
+    })?;
     if factor == 0 {
-        return Err(format_err(
+        return Err(DataError::format(
             &json_path,
             "a downscale factor of at least 1",
             "0",
@@ -205,13 +197,13 @@ pub fn load_nerfstudio(
         .get("frames")
         .and_then(Value::as_array)
         .filter(|f| !f.is_empty())
-        .ok_or_else(|| format_err(&json_path, "a non-empty list `frames`", "none"))?;
+        .ok_or_else(|| DataError::format(&json_path, "a non-empty list `frames`", "none"))?;
 
     let mut entries = Vec::with_capacity(frames.len());
     let mut camera: Option<(Intrinsics, String)> = None;
     for (i, frame) in frames.iter().enumerate() {
         let frame = frame.as_object().ok_or_else(|| {
-            format_err(
+            DataError::format(
                 &json_path,
                 format!("frame {i}: an object"),
                 frame.to_string(),
@@ -221,14 +213,14 @@ pub fn load_nerfstudio(
             .get("file_path")
             .and_then(Value::as_str)
             .ok_or_else(|| {
-                format_err(&json_path, format!("frame {i}: a string file_path"), "none")
+                DataError::format(&json_path, format!("frame {i}: a string file_path"), "none")
             })?;
         let what = format!("frame {i} ({file_path})");
         let own = intrinsics(&json, frame, &json_path, &what)?;
         match &camera {
             None => camera = Some((own, what.clone())),
             Some((first, first_what)) if *first != own => {
-                return Err(format_err(
+                return Err(DataError::format(
                     &json_path,
                     format!("one camera for every frame, as {first_what}'s: {first:?}"),
                     format!("{what}: {own:?}"),
@@ -237,7 +229,7 @@ pub fn load_nerfstudio(
             Some(_) => {}
         }
         let m = matrix4(frame.get("transform_matrix")).ok_or_else(|| {
-            format_err(
+            DataError::format(
                 &json_path,
                 format!("{what}: a 4×4 numeric transform_matrix with last row 0 0 0 1"),
                 format!("{:?}", frame.get("transform_matrix")),
@@ -254,7 +246,7 @@ pub fn load_nerfstudio(
     }
     entries.sort_by(|a, b| a.0.cmp(&b.0));
     if let Some(pair) = entries.windows(2).find(|p| p[0].0 == p[1].0) {
-        return Err(format_err(
+        return Err(DataError::format(
             &json_path,
             "each file_path once",
             format!("{} in frames {} and {}", pair[0].0, pair[0].1, pair[1].1),
@@ -283,51 +275,14 @@ pub fn load_nerfstudio(
     } else {
         full.clone()
     };
-    let pixels =
-        entries.len() as f64 * (camera.size[0] * camera.size[1]) as f64 / f64::from(factor).powi(2);
-    if pixels > super::colmap_scene::MAX_PIXELS as f64 {
-        return Err(format_err(
-            &json_path,
-            format!(
-                "at most {} pixels over all images (raise the downscale factor)",
-                super::colmap_scene::MAX_PIXELS
-            ),
-            format!("{pixels:.3e} pixels at factor {factor}"),
-        ));
-    }
+    let native = camera.camera;
+    check_size(entries.len(), &native, factor, &json_path)?;
     let resize = if all_downscaled || factor == 1 {
         1.0
     } else {
         1.0 / f64::from(factor)
     };
-    let (mut images, (width, height)) = load_same_size(&paths, &json_path, |p| {
-        let image = Image::load(p)?;
-        Ok(if resize == 1.0 {
-            image
-        } else {
-            image.resized(resize)
-        })
-    })?;
-    let [w0, h0] = camera.size.map(|s| s as f64);
-    if (width as f64 * h0 - height as f64 * w0).abs() > w0.max(h0) {
-        return Err(format_err(
-            &paths[0],
-            format!("an image of the camera's aspect ratio, {w0}×{h0} scaled by a common factor"),
-            format!("{width}×{height}"),
-        ));
-    }
-    let (sx, sy) = (width as f64 / w0, height as f64 / h0);
-    let pinhole = PinholeCamera {
-        width,
-        height,
-        fx: camera.focal[0] * sx,
-        fy: camera.focal[1] * sy,
-        cx: camera.centre[0] * sx,
-        cy: camera.centre[1] * sy,
-    };
-    for image in images.iter_mut().filter(|_| !camera.lens.is_none()) {
-        *image = camera.lens.undistort(image, &pinhole);
-    }
+    let (images, pinhole, max_distortion_px) = load_photos(&paths, &json_path, resize, &native)?;
     let dataset = Dataset {
         images,
         world_from_camera: entries.iter().map(|e| e.2).collect(),
@@ -336,7 +291,7 @@ pub fn load_nerfstudio(
         names: entries.iter().map(|e| relative(&e.0)).collect(),
     };
     let scene = NerfstudioScene {
-        max_distortion_px: camera.lens.max_shift_px(&pinhole),
+        max_distortion_px,
         frame_indices: entries.iter().map(|e| e.1).collect(),
         image_paths: full
             .iter()

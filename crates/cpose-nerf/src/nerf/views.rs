@@ -411,6 +411,15 @@ fn normalise_forward_facing(dataset: &mut Dataset) -> anyhow::Result<Normalisati
     Ok(normalisation)
 }
 
+/// `", undistorted (pixels moved by up to 3.72)"` for the log, or nothing for a pinhole camera.
+fn undistorted(max_shift_px: f64) -> String {
+    if max_shift_px > 0.0 {
+        format!(", undistorted (pixels moved by up to {max_shift_px:.2})")
+    } else {
+        String::new()
+    }
+}
+
 /// The distance of the cameras from the object after [`normalise_object_centric`], Blender's
 /// orbit radius.
 const OBJECT_CAMERA_DISTANCE: f64 = 4.0;
@@ -546,14 +555,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
                 colmap.model_dir.display(),
                 dataset.len(),
                 colmap.model.cameras[0].model.name(),
-                if colmap.max_distortion_px > 0.0 {
-                    format!(
-                        ", undistorted (pixels moved by up to {:.2})",
-                        colmap.max_distortion_px
-                    )
-                } else {
-                    String::new()
-                },
+                undistorted(colmap.max_distortion_px),
                 if colmap.unregistered.is_empty() {
                     String::new()
                 } else {
@@ -573,14 +575,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
                 "nerfstudio {}: {} frames{}",
                 scene.json_path.display(),
                 dataset.len(),
-                if scene.max_distortion_px > 0.0 {
-                    format!(
-                        ", undistorted (pixels moved by up to {:.2})",
-                        scene.max_distortion_px
-                    )
-                } else {
-                    String::new()
-                }
+                undistorted(scene.max_distortion_px)
             ));
             capture = Some(Capture::Nerfstudio(scene));
             // Around the object, the background beyond: samples uniform in disparity from the
