@@ -134,7 +134,7 @@ struct ConvertArgs {
 
 #[derive(Debug, clap::Args)]
 struct QueryArgs {
-    /// The saved field (`field_<condition>_<method>.safetensors` in a run folder).
+    /// The saved field (`field_<condition>_<method>.safetensors`), or a run folder holding one.
     field: PathBuf,
     /// Times to sample, seconds, comma-separated (inside the field's time range).
     #[arg(
@@ -733,6 +733,40 @@ fn convert(args: &ConvertArgs) -> Result<(), Failure> {
     Ok(())
 }
 
+/// `path` itself, or the one `field_*.safetensors` of the run folder `path`; a folder with none or
+/// several is an error listing what it holds.
+fn field_file(path: &Path) -> anyhow::Result<PathBuf> {
+    if !path.is_dir() {
+        return Ok(path.to_path_buf());
+    }
+    let mut fields: Vec<PathBuf> = std::fs::read_dir(path)
+        .with_context(|| format!("reading the run folder {}", path.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("field_") && n.ends_with(".safetensors"))
+        })
+        .collect();
+    fields.sort();
+    match fields.as_slice() {
+        [one] => Ok(one.clone()),
+        [] => anyhow::bail!(
+            "{}: expected a run folder holding a saved pose field (field_<condition>_<method>.safetensors), found none",
+            path.display()
+        ),
+        many => anyhow::bail!(
+            "{}: the run folder holds {} saved pose fields; name one: {}",
+            path.display(),
+            many.len(),
+            many.iter()
+                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
 fn query(args: &QueryArgs) -> Result<(), Failure> {
     let usage = |e: anyhow::Error| Failure::Usage(e);
     if let Some(out) = &args.out
@@ -744,8 +778,9 @@ fn query(args: &QueryArgs) -> Result<(), Failure> {
             out.display()
         )));
     }
-    let loaded = SavedPoseField::read(&args.field)
-        .and_then(|saved| saved.load(&args.field))
+    let field = field_file(&args.field).map_err(usage)?;
+    let loaded = SavedPoseField::read(&field)
+        .and_then(|saved| saved.load(&field))
         .map_err(usage)?;
     let range = loaded.field.time_range();
     let times = match args.rate {

@@ -1510,6 +1510,13 @@ fn events_saves_posenets_path_and_query_reproduces_it() {
         (1e-3, 1e-4),
     );
     assert!(!run.join("field_K6_eventnerf.safetensors").exists());
+    // The run folder names its one field.
+    let by_folder = cpose_in(&dir, &["query", "run", "--times", "0.5"]);
+    assert!(
+        by_folder.status.success(),
+        "{}",
+        String::from_utf8_lossy(&by_folder.stderr)
+    );
 }
 
 /// `nerf` saves the cameras of every method that learns a correction, `C(t) ∘ init(t)` in the
@@ -1546,6 +1553,14 @@ fn nerf_saves_its_cameras_and_query_reproduces_them() {
         );
     }
     assert!(!run.join("field_synthetic_true_poses.safetensors").exists());
+    // A run folder of several fields asks which.
+    let ambiguous = cpose_in(&dir, &["query", "run", "--times", "1"]);
+    let stderr = String::from_utf8_lossy(&ambiguous.stderr);
+    assert_eq!(ambiguous.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("holds 3 saved pose fields; name one: field_synthetic_barf.safetensors"),
+        "{stderr}"
+    );
 }
 
 #[test]
