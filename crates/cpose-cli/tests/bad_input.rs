@@ -2006,6 +2006,32 @@ fn task_configs() {
             ],
         },
         Case {
+            name: "nerf: colmap image name twice",
+            files: &[
+                ("sparse/0/cameras.txt", T(COLMAP_CAMERAS)),
+                (
+                    "sparse/0/images.txt",
+                    T("1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 0.1 0 0 1 a.png\n\n"),
+                ),
+                ("sparse/0/points3D.txt", T(COLMAP_POINTS)),
+                ("images/a.png", B(rgb_12x10)),
+            ],
+            args: &[
+                "run",
+                NERF,
+                "--set",
+                "data.source=\"colmap\"",
+                "--set",
+                "data.path=\".\"",
+            ],
+            code: 1,
+            expect: &[
+                "sparse/0/images.txt",
+                "each image name once",
+                "a.png for images 1 and 2",
+            ],
+        },
+        Case {
             name: "nerf: colmap without images.txt",
             files: &[
                 ("sparse/0/cameras.txt", T(COLMAP_CAMERAS)),

@@ -59,6 +59,8 @@ pub struct ColmapScene {
     pub model_dir: PathBuf,
     /// The format of its `images` file (the refined model is written in it).
     pub format: ColmapFormat,
+    /// The camera every image uses.
+    pub camera: ColmapCamera,
     /// The COLMAP image id of each dataset image.
     pub image_ids: Vec<u32>,
     /// Image files of the image folder that the model does not register (skipped).
@@ -155,6 +157,19 @@ pub fn load_colmap_scene(
 
     let mut order: Vec<usize> = (0..registered.len()).collect();
     order.sort_by(|&a, &b| registered[a].name.cmp(&registered[b].name));
+    if let Some(pair) = order
+        .windows(2)
+        .find(|w| registered[w[0]].name == registered[w[1]].name)
+    {
+        return Err(DataError::format(
+            &images_path(format.extension()),
+            "each image name once (photos are paired with poses by name)",
+            format!(
+                "{} for images {} and {}",
+                registered[pair[0]].name, registered[pair[0]].id, registered[pair[1]].id
+            ),
+        ));
+    }
 
     // The image folder, and the scale from it to the camera's size.
     let downscaled = scene_dir.join(format!("images_{factor}"));
@@ -207,6 +222,7 @@ pub fn load_colmap_scene(
         model,
         model_dir,
         format,
+        camera,
         image_ids,
         unregistered,
         max_distortion_px,

@@ -554,7 +554,7 @@ fn dataset_views(d: &DataConfig, render_config: &RenderConfig) -> anyhow::Result
                 "COLMAP model {}: {} registered images of camera {}{}{}",
                 colmap.model_dir.display(),
                 dataset.len(),
-                colmap.model.cameras[0].model.name(),
+                colmap.camera.model.name(),
                 undistorted(colmap.max_distortion_px),
                 if colmap.unregistered.is_empty() {
                     String::new()
