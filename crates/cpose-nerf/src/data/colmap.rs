@@ -269,11 +269,11 @@ impl ColmapFormat {
 
 /// The three files' stems.
 const CAMERAS: &str = "cameras";
-const IMAGES: &str = "images";
+pub(super) const IMAGES: &str = "images";
 const POINTS: &str = "points3D";
 
 /// Which file of part `stem` the folder has: `.bin` if it exists, else `.txt`, else none.
-fn find_part(dir: &Path, stem: &str) -> Option<(PathBuf, ColmapFormat)> {
+pub(super) fn find_part(dir: &Path, stem: &str) -> Option<(PathBuf, ColmapFormat)> {
     [ColmapFormat::Binary, ColmapFormat::Text]
         .into_iter()
         .map(|f| (dir.join(format!("{stem}.{}", f.extension())), f))

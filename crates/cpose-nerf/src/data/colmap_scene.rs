@@ -40,7 +40,8 @@ use nalgebra::{Isometry3, Point3};
 use super::Dataset;
 use super::capture::{NativeCamera, check_size, load_photos};
 use super::colmap::{
-    CameraModel, ColmapCamera, ColmapFormat, ColmapModel, read_colmap_model, write_colmap_model,
+    CameraModel, ColmapCamera, ColmapFormat, ColmapModel, IMAGES, find_part, read_colmap_model,
+    write_colmap_model,
 };
 use super::distortion::Distortion;
 use super::llff::list_images;
@@ -109,12 +110,9 @@ pub fn load_colmap_scene(
     }
     let model_dir = find_model_dir(scene_dir)?;
     let model = read_colmap_model(&model_dir)?;
-    let images_path = |ext: &str| model_dir.join(format!("images.{ext}"));
-    let format = if images_path("bin").is_file() {
-        ColmapFormat::Binary
-    } else {
-        ColmapFormat::Text
-    };
+    // The reader read `images` from this file (when there is one).
+    let (images_file, format) = find_part(&model_dir, IMAGES)
+        .unwrap_or_else(|| (model_dir.join("images.txt"), ColmapFormat::Text));
     let Some(registered) = &model.images else {
         return Err(DataError::format(
             &model_dir,
@@ -131,7 +129,7 @@ pub fn load_colmap_scene(
     };
     if registered.is_empty() {
         return Err(DataError::format(
-            &images_path(format.extension()),
+            &images_file,
             "at least one registered image",
             "none",
         ));
@@ -162,7 +160,7 @@ pub fn load_colmap_scene(
         .find(|w| registered[w[0]].name == registered[w[1]].name)
     {
         return Err(DataError::format(
-            &images_path(format.extension()),
+            &images_file,
             "each image name once (photos are paired with poses by name)",
             format!(
                 "{} for images {} and {}",
