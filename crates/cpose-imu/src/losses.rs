@@ -27,6 +27,17 @@ impl GyroWindow {
             gyro_start: interpolate(imu, tau - delta)?.gyro,
         })
     }
+
+    /// The window of a network that holds what the readings' own rotation over the window
+    /// misses, `N(τ) = P(τ)⁻¹ T(τ − Δ)⁻¹ T(τ)` with `P(τ)` the gyroscope integrated over
+    /// `(τ − Δ, τ]`: `P` obeys the kinematics at both ends of the window, which leaves
+    /// `q̇_N = ½ (q_N ⊗ (0, ω(τ)) − (0, ω(τ)) ⊗ q_N)`, the relation with `ω₀ = ω(τ)`.
+    pub fn residual(gyro: Vector3<f64>) -> Self {
+        Self {
+            gyro,
+            gyro_start: gyro,
+        }
+    }
 }
 
 /// The reading at `t`, linearly interpolated between its neighbours in `imu` (sorted by time);
@@ -129,5 +140,40 @@ mod tests {
         // A central difference with h = 1 ms, readings at 1 kHz: measured 2e-6.
         assert!(residual < 1e-4, "{residual}");
         assert!(GyroWindow::at(&imu, 0.1, delta).is_none());
+    }
+
+    /// The same motion with the gyroscope's rotation over each window taken out, `N(τ) =
+    /// P(τ)⁻¹ T(τ − Δ)⁻¹ T(τ)`, satisfies the residual's relation ([`GyroWindow::residual`]).
+    #[test]
+    fn the_residual_of_the_integrated_gyroscope_satisfies_its_relation() {
+        use cpose_core::{Order, PoseField};
+        let (motion, imu) = exact_imu(3.0, 5);
+        let delta = 0.2;
+        let residual_at = |tau: f64| {
+            let mut out = PoseBatch::default();
+            motion
+                .evaluate(&[tau - delta, tau], Order::Pose, &mut out)
+                .unwrap();
+            let turn = integrate_gyro(&imu, tau - delta, tau).unwrap();
+            turn.inverse() * (out.world_from_body(0).inverse() * out.world_from_body(1)).rotation
+        };
+        let (h, mut worst, mut plain) = (1e-3, 0.0_f64, f64::INFINITY);
+        for tau in [0.83, 1.57, 2.41] {
+            let (minus, mid, plus) = (residual_at(tau - h), residual_at(tau), residual_at(tau + h));
+            let sign =
+                |q: &UnitQuaternion<f64>| q.into_inner() * q.coords.dot(&mid.coords).signum();
+            let mut out = PoseBatch::zeros(1, Order::Velocity);
+            out.rotation[0] = mid.into_inner();
+            out.rotation_rate[0] = (sign(&plus) - sign(&minus)) / (2.0 * h);
+            let mut g = PoseBatch::zeros(1, Order::Velocity);
+            let window = [GyroWindow::residual(interpolate(&imu, tau).unwrap().gyro)];
+            worst = worst.max(increment_gyro_l1(&out, &window, 1.0, &mut g));
+            // The increment's own window does not fit the residual.
+            let increment = [GyroWindow::at(&imu, tau, delta).unwrap()];
+            plain = plain.min(increment_gyro_l1(&out, &increment, 1.0, &mut g));
+        }
+        // The readings integrated by the trapezoid rule at 1 kHz, a central difference of 1 ms.
+        assert!(worst < 1e-3, "{worst}");
+        assert!(plain > 20.0 * worst, "{plain} vs {worst}");
     }
 }

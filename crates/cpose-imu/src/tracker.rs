@@ -16,17 +16,18 @@
 //!
 //! Per frame `i`, with the readings in `(t_{i−1}, t_i]`:
 //! 1. **Prediction**: the IMU carries the pose forward from the previous frame (without IMU, the
-//!    start is the network's own extrapolation). The gyroscope's terms turn the network by
-//!    `imu.predict_steps` Adam steps on them alone. The accelerometer places the start's
-//!    position directly ([`accelerometer_position`]: the velocity fitted to the frames of the
-//!    latest `imu.velocity_secs`, the readings integrated twice). Through `p̈` it could not: on
-//!    the real flight at 5 Hz (every earlier frame perfect), 20 Adam steps on its loss with the
-//!    latest positions held left the start 9.4 cm off (17.2 cm in windows of 2 s), where the
-//!    network's own extrapolation is 9.8 cm off and standing still 9.0 cm; 1000 steps, 1.9 cm.
-//!    The closed form is 0.6 cm off. A start at the latest frames' velocity without the
-//!    accelerometer was 2.2 cm off there, but on EuRoC V1_02 at 10 Hz it lost the flight as soon
-//!    or sooner, and once lost it carried the estimate away by hundreds of metres; it is not
-//!    used.
+//!    start is the network's own extrapolation). The start turns from the previous estimate by
+//!    the gyroscope's rotation over the interval, in closed form, through the anchor `A_R`; the
+//!    gyroscope's terms then train the network alone for `imu.predict_steps` Adam steps, so that
+//!    its own motion agrees with the readings the start was taken from. (The steps alone used
+//!    to make the start: on the real flight at 5 Hz they left it 0.3–0.4° off where the closed
+//!    form is 0.03° off, and they could not follow 25° between frames.) The accelerometer places
+//!    the start's position directly ([`accelerometer_start`]: the velocity fitted to the frames
+//!    of the latest `imu.velocity_secs`, the readings integrated twice). Through `p̈` it could
+//!    not: on the real flight at 5 Hz (every earlier frame perfect), 20 Adam steps on its loss
+//!    with the latest positions held left the start 9.4 cm off (17.2 cm in windows of 2 s),
+//!    where the network's own extrapolation is 9.8 cm off and standing still 9.0 cm; 1000
+//!    steps, 1.9 cm. The closed form is 0.6 cm off.
 //! 2. **Tracking**: every step adds the gyroscope's loss to the tracking loss, `L_track/P + λ_g
 //!    L_gyro` (per pixel, `P = tracking.pixels`; the paper's weight is 1). The accelerometer's
 //!    loss on `p̈` is not added: nothing holds the network's velocity while tracking, so it
@@ -364,46 +365,18 @@ impl ImuPoseNet {
     }
 
     /// Prediction of the position: the start moves to where the accelerometer puts it
-    /// ([`accelerometer_position`]), from the frames of the latest `velocity_secs` (at least
-    /// two), the readings turned into the world by the earliest one's rotation carried by the
-    /// gyroscope.
+    /// ([`accelerometer_start`]) from the frames of the latest `velocity_secs`.
     fn accelerometer_start(&mut self, time: f64) -> anyhow::Result<()> {
-        let n = self.memory.len();
-        if n < 2 {
+        let times: Vec<f64> = self.memory.iter().map(|m| m.0).collect();
+        let first = latest_frames(&times, self.imu_config.velocity_secs);
+        let frames: Vec<(f64, Isometry3<f64>)> = self.memory[first..]
+            .iter()
+            .map(|(t, pose)| (*t, self.reference * pose))
+            .collect();
+        if frames.len() < 2 {
             return Ok(());
         }
-        let latest = self.memory[n - 1].0;
-        let first = self
-            .memory
-            .partition_point(|m| m.0 < latest - self.imu_config.velocity_secs)
-            .min(n - 2);
-        let held = &self.memory[first..];
-        let frames: Vec<(f64, Vector3<f64>)> = held
-            .iter()
-            .map(|(t, pose)| (*t, (self.reference * pose).translation.vector))
-            .collect();
-        let mut rotation = self.reference.rotation * held[0].1.rotation;
-        let from = frames[0].0;
-        let readings = &self.imu[self.imu.partition_point(|s| s.t_secs <= from)
-            ..self.imu.partition_point(|s| s.t_secs < time)];
-        let mut knots: Vec<f64> = frames.iter().map(|f| f.0).chain([time]).collect();
-        knots.extend(readings.iter().map(|s| s.t_secs));
-        knots.sort_by(f64::total_cmp);
-        knots.dedup();
-        let mut acceleration = Vec::with_capacity(knots.len());
-        for (k, &t) in knots.iter().enumerate() {
-            let turn = match k {
-                0 => Some(UnitQuaternion::identity()),
-                _ => losses::integrate_gyro(&self.imu, knots[k - 1], t),
-            };
-            let (Some(turn), Some(reading)) = (turn, losses::interpolate(&self.imu, t)) else {
-                bail!("the IMU readings do not cover the frames from {from} s to {time} s");
-            };
-            rotation *= turn;
-            acceleration.push(rotation * reading.accel + self.gravity_world);
-        }
-        let position = accelerometer_position(&frames, &knots, &acceleration, time)
-            .context("frame times must increase")?;
+        let position = accelerometer_start(&self.imu, &self.gravity_world, &frames, time)?;
         self.anchor_translation += position - self.pose().translation.vector;
         Ok(())
     }
@@ -488,6 +461,57 @@ fn window_network(
     Ok(Box::new(network.init::<f32>(range)?))
 }
 
+/// The first of the frame times `times` (increasing) within `secs` of the latest one, at most the
+/// second latest: the frames an accelerometer start fits its velocity to.
+fn latest_frames(times: &[f64], secs: f64) -> usize {
+    let Some(latest) = times.last() else {
+        return 0;
+    };
+    times
+        .partition_point(|t| *t < latest - secs)
+        .min(times.len().saturating_sub(2))
+}
+
+/// Where the accelerometer puts the body at `time` from the estimates `frames` (world poses at
+/// increasing times before `time`, at least one): the readings since the earliest frame turned
+/// into the world by its rotation carried by the gyroscope, `a = R f + g`, integrated twice with
+/// the velocity fitted to the frames ([`accelerometer_position`]).
+pub fn accelerometer_start(
+    imu: &[ImuSample],
+    gravity_world: &Vector3<f64>,
+    frames: &[(f64, Isometry3<f64>)],
+    time: f64,
+) -> anyhow::Result<Vector3<f64>> {
+    let Some((from, earliest)) = frames.first() else {
+        bail!("the accelerometer's start needs an earlier frame");
+    };
+    let mut rotation = earliest.rotation;
+    let readings =
+        &imu[imu.partition_point(|s| s.t_secs <= *from)..imu.partition_point(|s| s.t_secs < time)];
+    let mut knots: Vec<f64> = frames.iter().map(|f| f.0).chain([time]).collect();
+    knots.extend(readings.iter().map(|s| s.t_secs));
+    knots.sort_by(f64::total_cmp);
+    knots.dedup();
+    let mut acceleration = Vec::with_capacity(knots.len());
+    for (k, &t) in knots.iter().enumerate() {
+        let turn = match k {
+            0 => Some(UnitQuaternion::identity()),
+            _ => losses::integrate_gyro(imu, knots[k - 1], t),
+        };
+        let (Some(turn), Some(reading)) = (turn, losses::interpolate(imu, t)) else {
+            bail!("the IMU readings do not cover the frames from {from} s to {time} s");
+        };
+        rotation *= turn;
+        acceleration.push(rotation * reading.accel + gravity_world);
+    }
+    let positions: Vec<(f64, Vector3<f64>)> = frames
+        .iter()
+        .map(|(t, pose)| (*t, pose.translation.vector))
+        .collect();
+    accelerometer_position(&positions, &knots, &acceleration, time)
+        .context("frame times must increase")
+}
+
 impl PoseModel for ImuPoseNet {
     fn begin(
         &mut self,
@@ -515,6 +539,15 @@ impl PoseModel for ImuPoseNet {
         self.predict()?;
         self.anchor_at(previous_time, &previous)?;
         self.evaluate()?;
+        if self.mode != ImuMode::None {
+            // The start turns from the previous estimate by the gyroscope's rotation over the
+            // interval, in closed form, whatever the network's own motion there.
+            let turn =
+                losses::integrate_gyro(&self.imu, previous_time, time).with_context(|| {
+                    format!("the IMU readings do not cover frame {index} and the one before it")
+                })?;
+            self.anchor_rotation = previous.rotation * turn * self.current.rotation.inverse();
+        }
         if self.mode.accel() {
             self.accelerometer_start(time)?;
         }
@@ -590,24 +623,26 @@ impl PoseModel for ImuPoseNet {
 }
 
 /// PoseNet relative to the previous camera ([`PoseNetTracker`], the supplement's IMU reference
-/// `T_{b_{i−1}, b_i}`) with the IMU, by `mode`:
-/// - `loose`: the gyroscope's rotation over the frame interval, `Δq = Π Exp(ω Δt)`, ties the
-///   frame's relative rotation ([`MotionIncrement`], weight `λ_g P`).
-/// - `tight`: the network read as the motion over the last frame interval,
-///   `N(τ) = T(τ − Δ)⁻¹ T(τ)`, its rate supervised at the readings in `(t_{i−1}, t_i]`
-///   ([`losses::increment_gyro_l1`], weight `λ_g P`). While predicting, the rotations of the
-///   latest `imu.hold_frames` increments are held (an error of 0.01 in the quaternion, ≈ 1.1°,
-///   costs one unit of the per-pixel tracking loss) so that the relation carries them forward.
-///   The relation fixes only the change of the increment, so an error of the previous increment
-///   persists; loose coupling ties each increment afresh.
-/// - `accel`: the accelerometer's displacement over the frame interval
-///   ([`accelerometer_displacement`], weight `λ_a P` per metre) ties the frame's relative
-///   translation. Its velocity comes from the two previous estimates, so a tight tie feeds their
-///   errors forward: on the synthetic room with a 3-m bound on the relative translation, `λ_a` =
-///   0.3, 1, 3 and 10 gave 1.9, 2.1, 9.7 cm and a lost track (the paper's weight 1 kept).
+/// `T_{b_{i−1}, b_i}`) with the IMU. Every mode but `none` refers the frame to the previous camera
+/// moved by the IMU's motion over the interval, `T_i = T_{i−1} ∘ P_i ∘ N(t_i)`
+/// ([`PoseNetTracker::set_prediction`]): `P_i` turns by the gyroscope's rotation and, with the
+/// accelerometer, moves by its displacement ([`accelerometer_start`], the velocity fitted to
+/// the estimates of the latest `imu.velocity_secs`). The frame starts there, and the network
+/// holds only what the prediction misses — its extrapolation carries the IMU's slowly varying
+/// errors (bias) forward. By `mode`:
+/// - `loose`: the gyroscope's rotation ties the frame's (`N`'s rotation to the identity; a
+///   [`MotionIncrement`], weight `λ_g P`).
+/// - `tight`: the paper's `q̇ = ½ q ⊗ (0, ω)` on `N` as a function of time
+///   ([`losses::GyroWindow::residual`], weight `λ_g P`) at the readings in `(t_{i−1}, t_i]`.
+///   While predicting, the rotations of the latest `imu.hold_frames` residuals are held (an
+///   error of 0.01 in the quaternion, ≈ 1.1°, costs one unit of the per-pixel tracking loss) so
+///   that the relation carries them forward.
+/// - `accel`: the accelerometer's displacement ties the frame's translation (weight `λ_a P` per
+///   metre).
 /// - `combined`: `loose` and `accel`.
 ///
-/// `imu.predict_steps` steps on the ties and terms alone start each frame.
+/// `imu.predict_steps` steps on the ties and terms alone start each frame; the ties and the
+/// prediction come from the same readings, so they agree.
 pub struct RelativeImu {
     tracker: PoseNetTracker,
     /// Readings in the body frame, sorted by time (the frames' clock).
@@ -648,8 +683,36 @@ impl RelativeImu {
         })
     }
 
-    /// The gyroscope's terms of frame `index` on the network of increments (`None` before two
-    /// frames are tracked).
+    /// The IMU's motion `P_i` from the previous frame to frame `index`, in the previous body
+    /// frame: the gyroscope's rotation over the interval and, with the accelerometer from the
+    /// third frame on, its displacement ([`accelerometer_start`] from the estimates of the
+    /// latest `imu.velocity_secs`).
+    fn prediction(
+        &self,
+        index: usize,
+        time: f64,
+        history: &[Isometry3<f64>],
+    ) -> anyhow::Result<Isometry3<f64>> {
+        let uncovered =
+            || anyhow::anyhow!("the IMU readings do not cover frame {index} and the one before it");
+        let times = &self.frame_times[..index];
+        let previous = &history[index - 1];
+        let turn =
+            losses::integrate_gyro(&self.imu, times[index - 1], time).ok_or_else(uncovered)?;
+        let mut displacement = Vector3::zeros();
+        if self.mode.accel() && index >= 2 {
+            let first = latest_frames(times, self.config.velocity_secs);
+            let frames: Vec<(f64, Isometry3<f64>)> =
+                (first..index).map(|j| (times[j], history[j])).collect();
+            let position = accelerometer_start(&self.imu, &self.gravity_world, &frames, time)?;
+            displacement = previous.rotation.inverse() * (position - previous.translation.vector);
+        }
+        Ok(Isometry3::from_parts(displacement.into(), turn))
+    }
+
+    /// The gyroscope's terms of frame `index` on the network (`None` before two frames are
+    /// tracked): the network holds what the gyroscope's rotation over the last interval misses,
+    /// whose rate the readings give ([`losses::GyroWindow::residual`]).
     fn increment_terms(
         &self,
         index: usize,
@@ -659,21 +722,28 @@ impl RelativeImu {
         if self.mode != ImuMode::Tight || index < 2 {
             return Ok(None);
         }
-        let delta = time - self.frame_times[index - 1];
         let held = (index - 1).min(self.config.hold_frames);
         let from = self.frame_times[index - 1];
         let (times, readings): (Vec<f64>, Vec<losses::GyroWindow>) =
             spread(&self.imu, from, time, self.config.max_readings)
-                .filter_map(|s| {
-                    losses::GyroWindow::at(&self.imu, s.t_secs, delta).map(|r| (s.t_secs, r))
-                })
+                .map(|s| (s.t_secs, losses::GyroWindow::residual(s.gyro)))
                 .unzip();
         if readings.is_empty() {
             bail!("the IMU readings do not cover frame {index} and the interval before it");
         }
-        let (hold_times, hold_targets) = (index - held..index)
-            .map(|j| (self.frame_times[j], history[j - 1].inverse() * history[j]))
-            .unzip();
+        let mut hold_times = Vec::with_capacity(held);
+        let mut hold_targets = Vec::with_capacity(held);
+        for j in index - held..index {
+            let (t0, t1) = (self.frame_times[j - 1], self.frame_times[j]);
+            let turn = losses::integrate_gyro(&self.imu, t0, t1).with_context(|| {
+                format!("the IMU readings do not cover frame {j} and the one before it")
+            })?;
+            let residual = Isometry3::from_parts(Vector3::zeros().into(), turn).inverse()
+                * history[j - 1].inverse()
+                * history[j];
+            hold_times.push(t1);
+            hold_targets.push(residual);
+        }
         Ok(Some(Box::new(IncrementTerms {
             times,
             readings,
@@ -789,50 +859,6 @@ pub fn accelerometer_position(
     Some(position + velocity * (time - t0) + at(time)?)
 }
 
-/// The displacement `R_1ᵀ (p(t_2) − p_1)` the accelerometer predicts, in the body frame at `t_1`,
-/// from the poses `(t_0, T_0)` and `(t_1, T_1)`, `t_0 < t_1 < t_2`, and the readings over
-/// `[t_0, t_2]`. With the world acceleration `a = R f + g` (the rotation carried from each pose
-/// by the gyroscope): `v_1 = (p_1 − p_0 + ∫_{t_0}^{t_1} (s − t_0) a ds) / (t_1 − t_0)` and
-/// `p(t_2) − p_1 = v_1 (t_2 − t_1) + ∫_{t_1}^{t_2} (t_2 − s) a ds`. `None` if the readings do not
-/// cover `[t_0, t_2]` or the times are out of order.
-pub fn accelerometer_displacement(
-    imu: &[ImuSample],
-    gravity_world: &Vector3<f64>,
-    (t0, pose0): (f64, &Isometry3<f64>),
-    (t1, pose1): (f64, &Isometry3<f64>),
-    t2: f64,
-) -> Option<Vector3<f64>> {
-    if !(t0 < t1 && t1 < t2) {
-        return None;
-    }
-    let before = weighted_acceleration(imu, gravity_world, pose0.rotation, t0, t1, |s| s - t0)?;
-    let after = weighted_acceleration(imu, gravity_world, pose1.rotation, t1, t2, |s| t2 - s)?;
-    let v1 = (pose1.translation.vector - pose0.translation.vector + before) / (t1 - t0);
-    Some(pose1.rotation.inverse() * (v1 * (t2 - t1) + after))
-}
-
-/// `∫_{lo}^{hi} w(s) (R(s) f(s) + g) ds` with `R(lo) = r` carried by the gyroscope, by the
-/// midpoint rule on the readings' intervals (each at the mean of its two readings).
-fn weighted_acceleration(
-    imu: &[ImuSample],
-    gravity_world: &Vector3<f64>,
-    mut r: UnitQuaternion<f64>,
-    lo: f64,
-    hi: f64,
-    w: impl Fn(f64) -> f64,
-) -> Option<Vector3<f64>> {
-    let mut sum = Vector3::zeros();
-    for (a, b, from, to) in losses::clipped_intervals(imu, lo, hi)? {
-        let dt = to - from;
-        let omega = (a.gyro + b.gyro) * 0.5;
-        let mid = r * UnitQuaternion::from_scaled_axis(omega * (0.5 * dt));
-        let acceleration = mid * ((a.accel + b.accel) * 0.5) + gravity_world;
-        sum += acceleration * (w(0.5 * (from + to)) * dt);
-        r *= UnitQuaternion::from_scaled_axis(omega * dt);
-    }
-    Some(sum)
-}
-
 impl PoseModel for RelativeImu {
     fn begin(
         &mut self,
@@ -840,42 +866,28 @@ impl PoseModel for RelativeImu {
         time: f64,
         history: &[Isometry3<f64>],
     ) -> anyhow::Result<Isometry3<f64>> {
-        let times = &self.frame_times;
-        let uncovered = || {
-            anyhow::anyhow!("the IMU readings do not cover frame {index} and the ones before it")
-        };
-        if !matches!(self.mode, ImuMode::None | ImuMode::Tight) {
-            let previous = index.checked_sub(1).and_then(|i| times.get(i)).copied();
-            let rotation = previous
-                .and_then(|t0| losses::integrate_gyro(&self.imu, t0, time))
-                .ok_or_else(uncovered)?;
-            let translation = match index.checked_sub(2) {
-                Some(i) if self.mode.accel() => {
-                    let (t0, t1) = times.get(i).zip(times.get(i + 1)).ok_or_else(uncovered)?;
-                    let dp = accelerometer_displacement(
-                        &self.imu,
-                        &self.gravity_world,
-                        (*t0, &history[i]),
-                        (*t1, &history[i + 1]),
-                        time,
-                    )
-                    .ok_or_else(uncovered)?;
-                    Some((dp, self.config.accel_weight * self.pixels))
-                }
-                _ => None,
-            };
+        if self.mode != ImuMode::None {
+            let prediction = self.prediction(index, time, history)?;
+            self.tracker.set_prediction(Some(prediction));
             let loose = matches!(self.mode, ImuMode::Loose | ImuMode::Combined);
-            let increment = MotionIncrement {
-                rotation,
-                rotation_weight: if loose {
-                    self.config.gyro_weight * self.pixels
-                } else {
-                    0.0
-                },
-                translation,
-            };
-            self.tracker
-                .set_relative_term(Some(increment.term()), self.config.predict_steps);
+            let translation = self
+                .mode
+                .accel()
+                .then_some(prediction.translation.vector)
+                .filter(|_| index >= 2);
+            if loose || translation.is_some() {
+                let increment = MotionIncrement {
+                    rotation: prediction.rotation,
+                    rotation_weight: if loose {
+                        self.config.gyro_weight * self.pixels
+                    } else {
+                        0.0
+                    },
+                    translation: translation.map(|dp| (dp, self.config.accel_weight * self.pixels)),
+                };
+                self.tracker
+                    .set_relative_term(Some(increment.term()), self.config.predict_steps);
+            }
         }
         let terms = self.increment_terms(index, time, history)?;
         self.tracker.set_objective(terms, self.config.predict_steps);
@@ -1031,12 +1043,13 @@ mod tests {
                 "window {} s, {mode:?}: {:.2}°, {:.3} m (none: {:.2}°, {:.3} m)",
                 imu_config.window_secs, e.0, e.1, none.0, none.1
             );
-            // Measured: none 1.94°, loose 0.39°, tight 0.27°; in windows of 2 s: 2.49°, 0.27°,
-            // 0.19°. The accelerometer's start: 0.6 cm against 9.8 and 12.0 cm.
+            // Measured: none 2.04°, every IMU mode 0.03° (the gyroscope in closed form); in
+            // windows of 2 s: 2.49°, 0.03°. The accelerometer's start: 0.6 cm against 9.0 and
+            // 10.8 cm.
+            assert!(e.0 < 0.05 * none.0, "{mode:?}: {e:?} vs none {none:?}");
             if mode == ImuMode::Accel {
                 assert!(e.1 < 0.1 * none.1, "{mode:?}: {e:?} vs none {none:?}");
             } else {
-                assert!(e.0 < 0.3 * none.0, "{mode:?}: {e:?} vs none {none:?}");
                 // The gyroscope leaves the translation alone.
                 assert!(
                     (e.1 - none.1).abs() < 1e-9,
@@ -1089,9 +1102,9 @@ mod tests {
         assert!(fitted < 0.75 * two, "{fitted} vs {two}");
     }
 
-    /// The relative tracker too: with the gyroscope (integrated, or on the rate of its
-    /// increments) its start turns as the flight does, where its own extrapolation lags; with
-    /// the accelerometer's displacement it moves as the flight does.
+    /// The relative tracker too: every IMU mode starts the frame turned by the gyroscope's
+    /// rotation over the interval, where PoseNet's own extrapolation lags; with the
+    /// accelerometer it also moves as the flight does.
     #[test]
     fn the_imu_carries_the_relative_tracker() {
         let Some(flight) = flight(10.0) else {
@@ -1101,10 +1114,7 @@ mod tests {
         let (times, _, imu) = &flight;
         let config = PoseNetTrackConfig::default();
         let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
-        let imu_config = ImuTrackConfig {
-            predict_steps: 100,
-            ..ImuTrackConfig::default()
-        };
+        let imu_config = ImuTrackConfig::default();
         let mut prev = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
         let without = start_errors(&mut prev, &flight);
         let errors = |mode| {
@@ -1122,13 +1132,13 @@ mod tests {
             .unwrap();
             let e = start_errors(&mut model, &flight);
             eprintln!(
-                "{mode:?}: {:.2}°, {:.3} m (prev: {:.2}°, {:.3} m)",
+                "{mode:?}: {:.3}°, {:.4} m (prev: {:.3}°, {:.4} m)",
                 e.0, e.1, without.0, without.1
             );
             e
         };
-        // Measured: prev 1.89°, 4.6 cm; loose 0.05°; tight 0.09° (0.16° with the hold as L1);
-        // accel and combined 0.3 cm. With 20 steps: 0.18°, 0.40°, 0.6 cm.
+        // Measured: prev 1.79°, 5.0 cm; loose, tight, combined 0.03°, accel 0.08°; the gyroscope
+        // alone 4.8 cm, with the accelerometer 0.6 cm.
         let [loose, tight, accel, combined] = [
             ImuMode::Loose,
             ImuMode::Tight,
@@ -1136,26 +1146,21 @@ mod tests {
             ImuMode::Combined,
         ]
         .map(errors);
-        for gyro in [loose, tight, combined] {
-            assert!(gyro.0 < 0.1 * without.0, "{without:?} → {gyro:?}");
+        for e in [loose, tight, accel, combined] {
+            assert!(e.0 < 0.1 * without.0, "{without:?} → {e:?}");
         }
-        // The gyroscope leaves the translation alone.
         for gyro in [loose, tight] {
-            assert!((gyro.1 - without.1).abs() < 1e-9, "{without:?} → {gyro:?}");
+            assert!(gyro.1 < 1.05 * without.1, "{without:?} → {gyro:?}");
         }
-        assert!(
-            (accel.0 - without.0).abs() < 1e-9,
-            "{without:?} → {accel:?}"
-        );
         for displaced in [accel, combined] {
             assert!(displaced.1 < 0.2 * without.1, "{without:?} → {displaced:?}");
         }
     }
 
-    /// The accelerometer's displacement on an exact IMU of a known motion: a constant body rate
-    /// and a smooth path.
+    /// The accelerometer's start on an exact IMU of a known motion (a constant body rate and a
+    /// smooth path) from two and from three frames.
     #[test]
-    fn accelerometer_displacement_matches_the_motion() {
+    fn the_accelerometer_start_follows_the_motion() {
         let omega = Vector3::new(0.3, -0.2, 0.5);
         let g = Vector3::new(0.0, 0.0, -9.81);
         let pose = |t: f64| {
@@ -1176,11 +1181,13 @@ mod tests {
                 }
             })
             .collect();
-        let (p0, p1, p2) = (pose(0.1), pose(0.2), pose(0.3));
-        let dp = accelerometer_displacement(&imu, &g, (0.1, &p0), (0.2, &p1), 0.3).unwrap();
-        let truth = p1.rotation.inverse() * (p2.translation.vector - p1.translation.vector);
-        assert!((dp - truth).norm() < 1e-5, "{dp} vs {truth}");
-        assert!(accelerometer_displacement(&imu, &g, (0.1, &p0), (0.2, &p1), 0.5).is_none());
+        let frames: Vec<_> = [0.05, 0.1, 0.2].map(|t| (t, pose(t))).to_vec();
+        let truth = pose(0.3).translation.vector;
+        for first in [0, 1] {
+            let p = accelerometer_start(&imu, &g, &frames[first..], 0.3).unwrap();
+            assert!((p - truth).norm() < 1e-5, "{p} vs {truth}");
+        }
+        assert!(accelerometer_start(&imu, &g, &frames, 0.5).is_err());
     }
 
     /// On a cubic motion, whose acceleration is linear in time, the prediction is exact: from

@@ -13,7 +13,9 @@
 //!   (a batch of earlier frames plus the newest), so it stays a consistent function of time. Two hooks add terms of other sensors to a frame's
 //!   objective: on the network's relative pose at the frame ([`RelativePoseTerm`], e.g. a
 //!   measured motion since the previous frame) and on the network itself ([`NetworkObjective`],
-//!   e.g. on its time derivatives); `cpose-imu` implements both.
+//!   e.g. on its time derivatives); `cpose-imu` implements both. A third gives the previous
+//!   camera a predicted motion ([`PoseNetTracker::set_prediction`]): `T_ref = T_{i−1} ∘ P_i`, so
+//!   the network learns only what the prediction misses.
 //! * [`IntrinsicTracker`], the paper's intrinsic motion frame: the relative motion
 //!   `T_o ∘ T_I ∘ T_o⁻¹` from two such PoseNets, with the DOF loss on the intrinsic motion `T_I`.
 //!
@@ -230,6 +232,8 @@ pub struct PoseNetTracker {
     /// A term on the network itself for the next frame, and its prediction steps
     /// ([`PoseNetTracker::set_objective`]).
     objective: Option<(Box<dyn NetworkObjective>, usize)>,
+    /// The predicted motion `P_i` of the next frame to begin ([`PoseNetTracker::set_prediction`]).
+    prediction: Option<Isometry3<f64>>,
 }
 
 /// A term of a frame's objective on PoseNet itself rather than on the frame's pose — e.g. another
@@ -286,7 +290,16 @@ impl PoseNetTracker {
             next_relative_term: None,
             relative_term: None,
             objective: None,
+            prediction: None,
         })
+    }
+
+    /// The next frame to begin is referred to the previous camera moved by `motion`, `T_ref =
+    /// T_{i−1} ∘ P_i` (in the previous camera's frame), instead of the previous camera itself:
+    /// the frame starts at `T_{i−1} ∘ P_i ∘ PN(t_i)`, and the network holds what the prediction
+    /// misses, `PN(t_j) = P_j⁻¹ T_{j−1}⁻¹ T_j` ([`Reference::Previous`] only).
+    pub fn set_prediction(&mut self, motion: Option<Isometry3<f64>>) {
+        self.prediction = motion;
     }
 
     /// A term on the relative pose of the next frame to begin, which then starts with
@@ -378,8 +391,14 @@ impl PoseModel for PoseNetTracker {
         history: &[Isometry3<f64>],
     ) -> anyhow::Result<Isometry3<f64>> {
         self.start_frame(index);
+        let prediction = self.prediction.take();
+        if prediction.is_some() && self.reference != Reference::Previous {
+            anyhow::bail!("a predicted motion needs PoseNet relative to the previous camera");
+        }
         self.current_ref = match self.reference {
-            Reference::Previous => history[index - 1],
+            Reference::Previous => {
+                history[index - 1] * prediction.unwrap_or_else(Isometry3::identity)
+            }
             Reference::World => history[0],
             Reference::Random => {
                 let g = |rng: &mut ChaCha8Rng| {
