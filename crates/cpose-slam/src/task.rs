@@ -265,6 +265,10 @@ struct MethodResult {
     /// Relative pose error between consecutive tracked frames (`cpose eval rpe`, delta 1 frame).
     rpe_trans_rmse_cm: Option<f64>,
     rpe_rot_rmse_deg: Option<f64>,
+    /// The same for each frame's start against the previous estimate: how far the pose model's
+    /// prediction of the motion since the previous frame was off, before tracking.
+    start_rpe_trans_rmse_cm: Option<f64>,
+    start_rpe_rot_rmse_deg: Option<f64>,
     frames: usize,
     lost_frames: usize,
     first_lost: Option<usize>,
@@ -685,7 +689,8 @@ pub fn run_methods(
                 let time = frame.time;
                 let report = slam.process(frame, start, model.as_mut())?;
                 if let Some(r) = &report {
-                    tracking_log.row(i, time, r, &slam.estimates[i], truth[i].as_ref())?;
+                    let previous = (&slam.estimates[i - 1], truth[i - 1].as_ref());
+                    tracking_log.row(i, time, r, (&slam.estimates[i], truth[i].as_ref()), previous)?;
                 }
                 if let Some(r) = &report
                     && r.lost
@@ -811,6 +816,8 @@ pub fn run_methods(
                 drift_rmse_cm: scored.as_ref().map(|(_, _, d, _)| 100.0 * d.rmse_m),
                 rpe_trans_rmse_cm: scored.as_ref().map(|(.., r)| 100.0 * r.trans_rmse_m),
                 rpe_rot_rmse_deg: scored.as_ref().map(|(.., r)| r.rot_rmse_deg),
+                start_rpe_trans_rmse_cm: tracking_log.start_rpe().map(|(cm, _)| cm),
+                start_rpe_rot_rmse_deg: tracking_log.start_rpe().map(|(_, deg)| deg),
                 frames: n,
                 lost_frames: lost.len(),
                 first_lost: lost.first().copied(),
@@ -831,16 +838,21 @@ pub fn run_methods(
 }
 
 /// `tracking_<method>.csv`: one row per tracked frame, where the pose model started it and
-/// where tracking left it; with a ground truth, how far each was from the true camera. It tells
-/// a prediction that was already off from a tracking that moved a good start away.
+/// where tracking left it; with a ground truth, how far each was from the true camera, and how far
+/// the start's motion from the previous estimate was from the true motion (the prediction's
+/// error, whatever the drift before). It tells a prediction that was already off from a tracking
+/// that moved a good start away.
 struct TrackingLog {
     path: PathBuf,
     file: BufWriter<File>,
+    /// Sums of the squared start-step errors (cm², deg²) and their count.
+    start_steps: (f64, f64, usize),
 }
 
 impl TrackingLog {
     const HEADER: &str = "frame,time_s,start_error_cm,error_cm,start_rotation_error_deg,\
-                          rotation_error_deg,moved_cm,depth_error_cm,loss,lost";
+                          rotation_error_deg,moved_cm,depth_error_cm,loss,lost,\
+                          start_step_error_cm,start_step_rotation_error_deg";
 
     /// Creates `path`; a resumed run (`first > 0`) keeps the rows of the frames before `first`.
     fn open(path: &Path, first: usize) -> anyhow::Result<Self> {
@@ -861,24 +873,47 @@ impl TrackingLog {
         let mut log = Self {
             path: path.to_owned(),
             file: BufWriter::new(file),
+            start_steps: (0.0, 0.0, 0),
         };
         log.write(format_args!("{}", Self::HEADER))?;
         for line in &kept {
             log.write(format_args!("{line}"))?;
+            let fields: Vec<&str> = line.split(',').collect();
+            if let [.., cm, deg] = fields[..]
+                && fields.len() == Self::HEADER.split(',').count()
+                && let (Ok(cm), Ok(deg)) = (cm.parse(), deg.parse())
+            {
+                log.add_start_step(cm, deg);
+            }
         }
         Ok(log)
     }
 
-    /// The row of frame `index` at `time`: its report, the chosen `estimate` and the `truth`.
+    fn add_start_step(&mut self, cm: f64, deg: f64) {
+        if cm.is_finite() && deg.is_finite() {
+            self.start_steps.0 += cm * cm;
+            self.start_steps.1 += deg * deg;
+            self.start_steps.2 += 1;
+        }
+    }
+
+    /// The RMS of the start-step errors so far, cm and degrees (`None` without a ground truth).
+    fn start_rpe(&self) -> Option<(f64, f64)> {
+        let (cm, deg, count) = self.start_steps;
+        (count > 0).then(|| ((cm / count as f64).sqrt(), (deg / count as f64).sqrt()))
+    }
+
+    /// The row of frame `index` at `time`: its report, the chosen estimate and the truth, and the
+    /// previous frame's.
     fn row(
         &mut self,
         index: usize,
         time: f64,
         report: &TrackReport,
-        estimate: &Isometry3<f64>,
-        truth: Option<&Isometry3<f64>>,
+        (estimate, truth): (&Isometry3<f64>, Option<&Isometry3<f64>>),
+        (previous, previous_truth): (&Isometry3<f64>, Option<&Isometry3<f64>>),
     ) -> anyhow::Result<()> {
-        let errors = |pose: &Isometry3<f64>| {
+        let errors = |pose: &Isometry3<f64>, truth: Option<&Isometry3<f64>>| {
             truth.map_or((f64::NAN, f64::NAN), |t| {
                 (
                     100.0 * (pose.translation.vector - t.translation.vector).norm(),
@@ -886,10 +921,20 @@ impl TrackingLog {
                 )
             })
         };
-        let (start_cm, start_deg) = errors(&report.start);
-        let (cm, deg) = errors(estimate);
+        let (start_cm, start_deg) = errors(&report.start, truth);
+        let (cm, deg) = errors(estimate, truth);
+        // The start's motion from the previous estimate against the true motion.
+        let true_step = previous_truth.zip(truth).map(|(a, b)| a.inverse() * b);
+        let (step_cm, step_deg) = errors(&(previous.inverse() * report.start), true_step.as_ref());
+        // Summed as written, so that a resumed run, which reads the earlier rows back, sums the
+        // same numbers.
+        let (step_cm, step_deg) = (format!("{step_cm:.3}"), format!("{step_deg:.4}"));
+        if let (Ok(cm), Ok(deg)) = (step_cm.parse(), step_deg.parse()) {
+            self.add_start_step(cm, deg);
+        }
         self.write(format_args!(
-            "{index},{time:.6},{start_cm:.3},{cm:.3},{start_deg:.4},{deg:.4},{:.3},{:.3},{:.6},{}",
+            "{index},{time:.6},{start_cm:.3},{cm:.3},{start_deg:.4},{deg:.4},{:.3},{:.3},{:.6},{},\
+             {step_cm},{step_deg}",
             100.0 * report.moved,
             100.0 * report.depth_error,
             report.loss,
