@@ -578,6 +578,10 @@ impl PoseModel for ImuPoseNet {
         self.refit()
     }
 
+    fn start_is_measured(&self) -> bool {
+        self.mode != ImuMode::None
+    }
+
     fn save(&self, w: &mut Writer) {
         let range = self.net.time_range();
         w.u64(self.window);
@@ -904,6 +908,10 @@ impl PoseModel for RelativeImu {
 
     fn keep_best(&mut self) {
         self.tracker.keep_best();
+    }
+
+    fn start_is_measured(&self) -> bool {
+        self.mode != ImuMode::None
     }
 
     fn finish(&mut self, index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {

@@ -121,6 +121,9 @@ pub struct TrackReport {
     /// Whether the track counts as lost ([`TrackingConfig::lost_translation`],
     /// [`TrackingConfig::lost_depth_error`]).
     pub lost: bool,
+    /// A lost frame whose start was measured ([`PoseModel::start_is_measured`]): its estimate is
+    /// the start instead of the lost track, and it is left out of the map.
+    pub recovered: bool,
 }
 
 /// The state of one SLAM run.
@@ -316,11 +319,13 @@ impl Slam {
             self.timing.tracking_s += started.elapsed().as_secs_f64();
             Some(r)
         };
-        let is_keyframe = index.is_multiple_of(self.mapping.keyframe_every);
+        // A recovered frame's pose is a prediction the images did not confirm: not mapped.
+        let mapped = !report.is_some_and(|r| r.recovered);
+        let is_keyframe = mapped && index.is_multiple_of(self.mapping.keyframe_every);
         let started = Instant::now();
         if index == 0 {
             self.map_window(&frame, index, self.mapping.first_iterations);
-        } else if index.is_multiple_of(self.mapping.every) {
+        } else if mapped && index.is_multiple_of(self.mapping.every) {
             self.map_window(&frame, index, self.mapping.iterations);
         }
         self.timing.mapping_s += started.elapsed().as_secs_f64();
@@ -375,19 +380,22 @@ impl Slam {
                 .quaternion_translation(&body.rotation);
             model.step(&gq, &gt)?;
         }
-        let body = best.1;
+        let (loss, tracked, depth_error) = best;
+        let moved = (tracked.translation.vector - start.translation.vector).norm();
+        let lost =
+            moved > self.tracking.lost_translation || depth_error > self.tracking.lost_depth_error;
+        let recovered = lost && model.start_is_measured();
+        let body = if recovered { start } else { tracked };
         model.finish(index, frame.time, &body)?;
         self.bodies.push(body);
         self.estimates.push(body * mount);
-        let moved = (body.translation.vector - start.translation.vector).norm();
-        let depth_error = best.2;
         Ok(TrackReport {
             start: start * mount,
-            loss: best.0 / self.tracking.pixels as f64,
+            loss: loss / self.tracking.pixels as f64,
             moved,
             depth_error,
-            lost: moved > self.tracking.lost_translation
-                || depth_error > self.tracking.lost_depth_error,
+            lost,
+            recovered,
         })
     }
 
@@ -576,6 +584,74 @@ mod tests {
             .unwrap()
             .unwrap();
         assert!(bad.lost && bad.moved == 0.0, "{bad:?}");
+    }
+
+    /// Starts at a pose and tracks to another at once.
+    struct Jumping {
+        start: Isometry3<f64>,
+        to: Isometry3<f64>,
+        measured: bool,
+    }
+
+    impl PoseModel for Jumping {
+        fn begin(
+            &mut self,
+            _: usize,
+            _: f64,
+            _: &[Isometry3<f64>],
+        ) -> anyhow::Result<Isometry3<f64>> {
+            Ok(self.start)
+        }
+        fn pose(&self) -> Isometry3<f64> {
+            self.to
+        }
+        fn step(&mut self, _: &Quaternion<f64>, _: &Vector3<f64>) -> anyhow::Result<()> {
+            Ok(())
+        }
+        fn finish(&mut self, _: usize, _: f64, _: &Isometry3<f64>) -> anyhow::Result<()> {
+            Ok(())
+        }
+        fn start_is_measured(&self) -> bool {
+            self.measured
+        }
+    }
+
+    /// A track lost 1 m away from a measured start falls back to the start; from the model's own
+    /// extrapolation, it keeps the tracked pose (and is only reported).
+    #[test]
+    fn a_lost_frame_falls_back_to_a_measured_start() {
+        let (config, camera, poses) = walk(2);
+        let mapping = MappingConfig {
+            first_iterations: 20,
+            ..MappingConfig::default()
+        };
+        let tracking = TrackingConfig {
+            iterations: 2,
+            ..TrackingConfig::default()
+        };
+        let far = poses[1] * Isometry3::translation(1.0, 0.0, 0.0);
+        for measured in [true, false] {
+            let mut slam = room_slam(camera, &tracking, &mapping);
+            let frame = |i: usize| room_frame(&config, &camera, &poses[i], i);
+            slam.process(frame(0), poses[0], &mut Fixed(poses[0]))
+                .unwrap();
+            let mut model = Jumping {
+                start: poses[1],
+                to: far,
+                measured,
+            };
+            let report = slam
+                .process(frame(1), poses[0], &mut model)
+                .unwrap()
+                .unwrap();
+            assert!(report.lost && report.recovered == measured, "{report:?}");
+            let kept = if measured { poses[1] } else { far };
+            let estimate = slam.estimates[1] * slam.body_from_camera.inverse();
+            assert!(
+                (estimate.translation.vector - kept.translation.vector).norm() < 1e-12,
+                "{measured}: {estimate:?}"
+            );
+        }
     }
 
     /// Runs `frames` frames of the synthetic room at 128×73 and returns the mean position error

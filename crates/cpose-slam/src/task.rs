@@ -271,6 +271,8 @@ struct MethodResult {
     start_rpe_rot_rmse_deg: Option<f64>,
     frames: usize,
     lost_frames: usize,
+    /// Lost frames whose estimate fell back to their measured start ([`TrackReport::recovered`]).
+    recovered_frames: usize,
     first_lost: Option<usize>,
     /// Frames over the run's wall time (tracking, mapping, reading frames, checkpoints).
     fps: f64,
@@ -698,8 +700,16 @@ pub fn run_methods(
                     if lost.is_empty() {
                         unit.log(format_args!(
                             "track lost at frame {i} (moved {:.3} m while tracking, median depth \
-                             error {:.3} m, loss {:.3})",
-                            r.moved, r.depth_error, r.loss
+                             error {:.3} m, loss {:.3}){}",
+                            r.moved,
+                            r.depth_error,
+                            r.loss,
+                            if r.recovered {
+                                "; the frame keeps its start, measured by the IMU, and is not \
+                                 mapped (later lost frames too; recovered_frames counts them)"
+                            } else {
+                                ""
+                            }
                         ));
                     }
                     lost.push(i);
@@ -820,6 +830,7 @@ pub fn run_methods(
                 start_rpe_rot_rmse_deg: tracking_log.start_rpe().map(|(_, deg)| deg),
                 frames: n,
                 lost_frames: lost.len(),
+                recovered_frames: tracking_log.recovered,
                 first_lost: lost.first().copied(),
                 fps: n as f64 / wall_s,
                 tracking_fps: slam.tracking_fps(),
@@ -847,11 +858,13 @@ struct TrackingLog {
     file: BufWriter<File>,
     /// Sums of the squared start-step errors (cm², deg²) and their count.
     start_steps: (f64, f64, usize),
+    /// Frames recovered from a lost track ([`TrackReport::recovered`]).
+    recovered: usize,
 }
 
 impl TrackingLog {
     const HEADER: &str = "frame,time_s,start_error_cm,error_cm,start_rotation_error_deg,\
-                          rotation_error_deg,moved_cm,depth_error_cm,loss,lost,\
+                          rotation_error_deg,moved_cm,depth_error_cm,loss,lost,recovered,\
                           start_step_error_cm,start_step_rotation_error_deg";
 
     /// Creates `path`; a resumed run (`first > 0`) keeps the rows of the frames before `first`.
@@ -874,16 +887,18 @@ impl TrackingLog {
             path: path.to_owned(),
             file: BufWriter::new(file),
             start_steps: (0.0, 0.0, 0),
+            recovered: 0,
         };
         log.write(format_args!("{}", Self::HEADER))?;
         for line in &kept {
             log.write(format_args!("{line}"))?;
             let fields: Vec<&str> = line.split(',').collect();
-            if let [.., cm, deg] = fields[..]
+            if let [.., recovered, cm, deg] = fields[..]
                 && fields.len() == Self::HEADER.split(',').count()
                 && let (Ok(cm), Ok(deg)) = (cm.parse(), deg.parse())
             {
                 log.add_start_step(cm, deg);
+                log.recovered += usize::from(recovered == "1");
             }
         }
         Ok(log)
@@ -932,13 +947,15 @@ impl TrackingLog {
         if let (Ok(cm), Ok(deg)) = (step_cm.parse(), step_deg.parse()) {
             self.add_start_step(cm, deg);
         }
+        self.recovered += usize::from(report.recovered);
         self.write(format_args!(
             "{index},{time:.6},{start_cm:.3},{cm:.3},{start_deg:.4},{deg:.4},{:.3},{:.3},{:.6},{},\
-             {step_cm},{step_deg}",
+             {},{step_cm},{step_deg}",
             100.0 * report.moved,
             100.0 * report.depth_error,
             report.loss,
-            u8::from(report.lost)
+            u8::from(report.lost),
+            u8::from(report.recovered)
         ))
     }
 

@@ -65,6 +65,12 @@ pub trait PoseModel: Send {
     fn metrics(&self) -> Vec<(&'static str, f64)> {
         Vec::new()
     }
+    /// Whether the frame's start is another sensor's measurement of the motion (an IMU's) rather
+    /// than the model's own extrapolation: a frame whose track is lost then falls back to it
+    /// ([`crate::slam::TrackReport::recovered`]).
+    fn start_is_measured(&self) -> bool {
+        false
+    }
 }
 
 /// `∂L/∂q` of the unit quaternion `q/‖q‖` pulled back to the raw `q`:
