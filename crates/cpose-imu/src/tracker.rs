@@ -75,8 +75,12 @@ pub struct ImuTrackConfig {
     /// `λ_g δ/Δ` there and `λ_g δ` in loose's; the windowed setting's weight is chosen in
     /// `docs/results/imu.md`.
     pub gyro_weight: f64,
-    /// Weight `λ_a` of the accelerometer's tie in the relative family ([`RelativeImu`]); the
-    /// absolute network's start takes the accelerometer's position as it is.
+    /// Weight `λ_a` of a tie of the frame's translation to the accelerometer's displacement in
+    /// the relative family ([`RelativeImu`]; 0: none, the displacement only starts the frame).
+    /// The displacement is turned into the world by the estimates' rotations, so a tie holds a
+    /// tilted estimate where gravity puts it; the default is measured on
+    /// `docs/results/imu.md`. The absolute network's start takes the accelerometer's position as
+    /// it is.
     pub accel_weight: f64,
     /// Adam steps on the gyroscope's terms alone before a frame is tracked (0: none).
     pub predict_steps: usize,
@@ -111,7 +115,7 @@ impl Default for ImuTrackConfig {
     fn default() -> Self {
         Self {
             gyro_weight: 1.0,
-            accel_weight: 1.0,
+            accel_weight: 0.0,
             predict_steps: 20,
             hold_frames: 3,
             velocity_secs: 0.8,
@@ -641,8 +645,8 @@ impl PoseModel for ImuPoseNet {
 ///   While predicting, the rotations of the latest `imu.hold_frames` residuals are held (an
 ///   error of 0.01 in the quaternion, ≈ 1.1°, costs one unit of the per-pixel tracking loss) so
 ///   that the relation carries them forward.
-/// - `accel`: the accelerometer's displacement ties the frame's translation (weight `λ_a P` per
-///   metre).
+/// - `accel`: the prediction's displacement, and with `imu.accel_weight` > 0 a tie of the
+///   frame's translation to it (weight `λ_a P` per metre).
 /// - `combined`: `loose` and `accel`.
 ///
 /// `imu.predict_steps` steps on the ties and terms alone start each frame; the ties and the
@@ -874,11 +878,8 @@ impl PoseModel for RelativeImu {
             let prediction = self.prediction(index, time, history)?;
             self.tracker.set_prediction(Some(prediction));
             let loose = matches!(self.mode, ImuMode::Loose | ImuMode::Combined);
-            let translation = self
-                .mode
-                .accel()
-                .then_some(prediction.translation.vector)
-                .filter(|_| index >= 2);
+            let translation = (self.mode.accel() && index >= 2 && self.config.accel_weight > 0.0)
+                .then_some(prediction.translation.vector);
             if loose || translation.is_some() {
                 let increment = MotionIncrement {
                     rotation: prediction.rotation,
