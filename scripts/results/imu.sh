@@ -6,7 +6,8 @@
 #
 #   scripts/results/imu.sh [TABLE...]
 #
-# TABLE is synthetic, euroc or windows_gyro (default: all, in that order).
+# TABLE is synthetic, gyro_weight, accel_tie, euroc or windows_gyro (default: all, in that
+# order).
 # Runs go to runs/results/imu/NAME (common.sh: environment); a finished run is kept and an
 # interrupted one resumed. The tables are printed to stdout. One EuRoC run of all eleven methods
 # takes about 1.5 hours on two cores.
@@ -20,7 +21,7 @@ euroc_windows=configs/euroc_v102_imu_windows.toml
 euroc_data="euroc.path=\"$data/euroc/V1_02_excerpt\""
 absolute='slam.methods=["none","loose","tight","accel","combined"]'
 relative='slam.methods=["baseline","prev","prev_loose","prev_tight","prev_accel","prev_combined"]'
-metrics=ate_rmse_cm,first_lost,lost_frames
+metrics=ate_rmse_cm,start_rpe_trans_rmse_cm,start_rpe_rot_rmse_deg,lost_frames,first_lost,recovered_frames
 
 # windows NAME CONFIG [ARGS...]: NAME with the absolute PoseNet in windows of 2 s (3 bands) and
 # the gyroscope's weight at a tenth; ARGS add the rotation rate (a fifth of the config's).
@@ -36,6 +37,26 @@ table_synthetic() {
     run synthetic "$room"
     table "Synthetic room at 5 Hz, simulated IMU (configs/synthetic_imu.toml)" "$metrics" \
         "$out/synthetic"
+}
+
+# The gyroscope's weight at the paper's 1 (the default 10 is table synthetic).
+table_gyro_weight() {
+    run synthetic-gyro-weight1 "$room" --set imu.gyro_weight=1
+    table "The synthetic room with the gyroscope's weight at the paper's 1 (imu.gyro_weight)" \
+        "$metrics" "$out/synthetic-gyro-weight1"
+}
+
+# The relative family's accelerometer tie (imu.accel_weight; the default 0 is table synthetic).
+table_accel_tie() {
+    dirs=
+    for weight in 1 0.1; do
+        run "synthetic-accel-weight$weight" "$room" \
+            --set 'slam.methods=["prev_accel","prev_combined"]' --set "imu.accel_weight=$weight"
+        dirs="$dirs $out/synthetic-accel-weight$weight"
+    done
+    # shellcheck disable=SC2086
+    table "The synthetic room with the accelerometer's tie (imu.accel_weight = 1, 0.1)" \
+        "$metrics" $dirs
 }
 
 table_euroc() {
@@ -67,6 +88,6 @@ table_windows_gyro() {
         "$metrics" $dirs
 }
 
-tables=$(tables_from "synthetic euroc windows_gyro" "$@")
+tables=$(tables_from "synthetic gyro_weight accel_tie euroc windows_gyro" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables

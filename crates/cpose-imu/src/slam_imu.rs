@@ -1,9 +1,11 @@
 //! Task `slam_imu`: RGB-D neural SLAM with an IMU (paper §3.4, its EuRoC table and the
 //! supplement's IMU tables). Methods: NICE-SLAM's free pose (`baseline`), PoseNet relative to the
-//! previous camera without IMU (`prev`, task `slam`'s) and with the IMU (`prev_loose`,
-//! `prev_tight`, `prev_accel`, `prev_combined`; [`crate::tracker::RelativeImu`]), and the
-//! absolute PoseNet with the IMU in tracking ([`crate::tracker::ImuPoseNet`]) as `none`,
-//! `loose`, `tight`, `accel` or `combined`.
+//! previous camera without IMU (`prev`, task `slam`'s) and started from the IMU's motion over
+//! each frame interval (`prev_loose`, `prev_tight`, `prev_accel`, `prev_combined`;
+//! [`crate::tracker::RelativeImu`], the primary family), and the experimental absolute PoseNet
+//! with the IMU in tracking ([`crate::tracker::ImuPoseNet`]) as `none`, `loose`, `tight`,
+//! `accel` or `combined`. A lost frame of an IMU method keeps its IMU-predicted start and is not
+//! mapped ([`cpose_slam::slam::TrackReport::recovered`]).
 //!
 //! Data, either
 //! * **`[euroc]`**: the synthetic room rendered along a real flight — a EuRoC sequence's ground
@@ -534,7 +536,7 @@ mod tests {
     fn the_default_config_holds_the_defaults() {
         let required = "task = \"slam_imu\"\n[data]\nsource = \"synthetic\"\n\
                         path = \"data/synthetic_room\"\n[slam]\n\
-                        methods = [\"baseline\", \"prev\", \"prev_tight\", \"none\", \"loose\", \"tight\"]\n";
+                        methods = [\"baseline\", \"prev\", \"prev_loose\", \"prev_tight\", \"prev_combined\"]\n";
         cpose_core::testing::check_default_config("slam_imu", required, Settings::new);
     }
 

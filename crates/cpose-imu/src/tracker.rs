@@ -72,8 +72,10 @@ use crate::{ImuMode, ImuSample};
 pub struct ImuTrackConfig {
     /// Weight `λ_g` of the gyroscope loss (loose or tight) against the tracking loss per pixel.
     /// Tight's residual is a rate: over a frame interval `Δ` a rotation error `δ` costs about
-    /// `λ_g δ/Δ` there and `λ_g δ` in loose's; the windowed setting's weight is chosen in
-    /// `docs/results/imu.md`.
+    /// `λ_g δ/Δ` there and `λ_g δ` in loose's. The default, 10 (the paper's 1), lets the images
+    /// turn the frame away from the gyroscope's rotation only where they disagree strongly: over
+    /// a frame interval the integrated readings are far more precise than a tracked rotation
+    /// (`docs/results/imu.md`).
     pub gyro_weight: f64,
     /// Weight `λ_a` of a tie of the frame's translation to the accelerometer's displacement in
     /// the relative family ([`RelativeImu`]; 0: none, the displacement only starts the frame).
@@ -114,7 +116,7 @@ pub struct ImuTrackConfig {
 impl Default for ImuTrackConfig {
     fn default() -> Self {
         Self {
-            gyro_weight: 1.0,
+            gyro_weight: 10.0,
             accel_weight: 0.0,
             predict_steps: 20,
             hold_frames: 3,
