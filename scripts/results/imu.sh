@@ -59,10 +59,18 @@ table_accel_tie() {
         "$metrics" $dirs
 }
 
+# The relative family at 5 Hz on the flight, seeds 0 (euroc-5hz) to 3.
 table_euroc_5hz() {
     run euroc-5hz "$euroc" --set "$euroc_data" --set data.stride=2 --set "$relative"
+    dirs="$out/euroc-5hz"
+    for seed in 1 2 3; do
+        run "euroc-5hz-s$seed" "$euroc" --set "$euroc_data" --set data.stride=2 \
+            --set "$relative" --set "run.seed=$seed"
+        dirs="$dirs $out/euroc-5hz-s$seed"
+    done
+    # shellcheck disable=SC2086
     table "EuRoC V1_02 at 5 Hz, every second frame (configs/euroc_v102_imu.toml)" \
-        "$metrics" "$out/euroc-5hz"
+        "$metrics" $dirs
 }
 
 table_euroc() {
