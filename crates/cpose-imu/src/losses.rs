@@ -1,5 +1,6 @@
 //! The losses of the relative tracker's IMU tie: the gyroscope at both ends of a frame interval
-//! supervises a network of increments ([`increment_gyro_l1`]). The absolute losses (poses,
+//! supervises a network of increments ([`increment_gyro_l1`]), or of what the readings integrated
+//! over the interval miss ([`GyroWindow::residual`]). The absolute losses (poses,
 //! gyroscope, accelerometer) are `cpose_core`'s, re-exported here.
 
 use cpose_core::PoseBatch;
