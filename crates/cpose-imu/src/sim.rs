@@ -86,7 +86,8 @@ pub fn simulate_imu(
 /// protocol): the poses at `times` are interpolated to `rate_hz` — a natural cubic spline for
 /// the translation, slerp for the rotation — and differentiated numerically at that rate:
 /// `ω_k = Log(R_{k−1}ᵀ R_{k+1}) / 2Δt` and `p̈_k = (p_{k+1} − 2 p_k + p_{k−1}) / Δt²` (one-sided
-/// at the ends), `f_k = R_kᵀ (p̈_k − g)`. Readings start at `times[0]` and end by the last time.
+/// at the ends), `f_k = R_kᵀ (p̈_k − g)`. Readings start at `times[0]` and end at the first grid
+/// time not before the last frame (the spline extrapolated, the rotation held past it).
 /// `None` if fewer than two poses, times not increasing, or `rate_hz` not positive.
 pub fn imu_from_poses(
     times: &[f64],
@@ -104,7 +105,11 @@ pub fn imu_from_poses(
     let positions: Vec<Vector3<f64>> = poses.iter().map(|p| p.translation.vector).collect();
     let curvature = natural_spline_second_derivatives(times, &positions);
     let dt = 1.0 / rate_hz;
-    let m = ((times[n - 1] - times[0]) * rate_hz).floor() as usize + 1;
+    let mut m = ((times[n - 1] - times[0]) * rate_hz).floor() as usize + 1;
+    if times[0] + (m - 1) as f64 * dt < times[n - 1] {
+        // A reading at or after the last frame, so that the readings cover every frame interval.
+        m += 1;
+    }
     if m < 3 {
         return None;
     }
@@ -275,6 +280,13 @@ mod tests {
         assert!(
             accel < 0.003 * signal(|s| s.accel),
             "accel RMS error {accel}"
+        );
+        // Frames that do not end on a reading's time: the readings still cover the last one.
+        let short = imu_from_poses(&frame_times[..12], &poses[..12], 200.0, &g, None, 0).unwrap();
+        let last = short.samples.last().unwrap().t_secs;
+        assert!(
+            last >= frame_times[11] && last < frame_times[11] + 0.005,
+            "{last}"
         );
         // Degenerate input.
         assert!(imu_from_poses(&frame_times[..1], &poses[..1], 200.0, &g, None, 0).is_none());
