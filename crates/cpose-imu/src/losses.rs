@@ -109,6 +109,23 @@ mod tests {
         check_batch_loss_gradient(|b, g| increment_gyro_l1(b, &readings, 1.3, g));
     }
 
+    /// The relation's residual at `tau` for the rotation `rotation(τ)`, its rate taken by a
+    /// central difference of 1 ms.
+    fn relation_residual(
+        rotation: impl Fn(f64) -> UnitQuaternion<f64>,
+        tau: f64,
+        window: GyroWindow,
+    ) -> f64 {
+        let h = 1e-3;
+        let (minus, mid, plus) = (rotation(tau - h), rotation(tau), rotation(tau + h));
+        let sign = |q: &UnitQuaternion<f64>| q.into_inner() * q.coords.dot(&mid.coords).signum();
+        let mut out = PoseBatch::zeros(1, cpose_core::Order::Velocity);
+        out.rotation[0] = mid.into_inner();
+        out.rotation_rate[0] = (sign(&plus) - sign(&minus)) / (2.0 * h);
+        let mut g = PoseBatch::zeros(1, cpose_core::Order::Velocity);
+        increment_gyro_l1(&out, &[window], 1.0, &mut g)
+    }
+
     /// Along a known motion with its exact IMU, the increment `N(τ) = T(τ − Δ)⁻¹ T(τ)` — its
     /// rate taken here by central differences of the poses — satisfies the relation.
     #[test]
@@ -123,20 +140,13 @@ mod tests {
                 .unwrap();
             (out.world_from_body(0).inverse() * out.world_from_body(1)).rotation
         };
-        let (h, mut residual) = (1e-3, 0.0_f64);
+        let mut residual = 0.0_f64;
         for tau in [0.83, 1.57, 2.41] {
-            let (minus, mid, plus) = (increment(tau - h), increment(tau), increment(tau + h));
-            let sign =
-                |q: &UnitQuaternion<f64>| q.into_inner() * q.coords.dot(&mid.coords).signum();
-            let mut out = PoseBatch::zeros(1, Order::Velocity);
-            out.rotation[0] = mid.into_inner();
-            out.rotation_rate[0] = (sign(&plus) - sign(&minus)) / (2.0 * h);
-            let mut g = PoseBatch::zeros(1, Order::Velocity);
-            let r = [GyroWindow::at(&imu, tau, delta).unwrap()];
-            residual = residual.max(increment_gyro_l1(&out, &r, 1.0, &mut g));
+            let window = GyroWindow::at(&imu, tau, delta).unwrap();
+            residual = residual.max(relation_residual(increment, tau, window));
             // A wrong window leaves a residual: the relation does tie Δ.
-            let wrong = [GyroWindow::at(&imu, tau, 0.5 * delta).unwrap()];
-            assert!(increment_gyro_l1(&out, &wrong, 1.0, &mut g) > 0.05);
+            let wrong = GyroWindow::at(&imu, tau, 0.5 * delta).unwrap();
+            assert!(relation_residual(increment, tau, wrong) > 0.05);
         }
         // A central difference with h = 1 ms, readings at 1 kHz: measured 2e-6.
         assert!(residual < 1e-4, "{residual}");
@@ -158,20 +168,13 @@ mod tests {
             let turn = integrate_gyro(&imu, tau - delta, tau).unwrap();
             turn.inverse() * (out.world_from_body(0).inverse() * out.world_from_body(1)).rotation
         };
-        let (h, mut worst, mut plain) = (1e-3, 0.0_f64, f64::INFINITY);
+        let (mut worst, mut plain) = (0.0_f64, f64::INFINITY);
         for tau in [0.83, 1.57, 2.41] {
-            let (minus, mid, plus) = (residual_at(tau - h), residual_at(tau), residual_at(tau + h));
-            let sign =
-                |q: &UnitQuaternion<f64>| q.into_inner() * q.coords.dot(&mid.coords).signum();
-            let mut out = PoseBatch::zeros(1, Order::Velocity);
-            out.rotation[0] = mid.into_inner();
-            out.rotation_rate[0] = (sign(&plus) - sign(&minus)) / (2.0 * h);
-            let mut g = PoseBatch::zeros(1, Order::Velocity);
-            let window = [GyroWindow::residual(interpolate(&imu, tau).unwrap().gyro)];
-            worst = worst.max(increment_gyro_l1(&out, &window, 1.0, &mut g));
+            let window = GyroWindow::residual(interpolate(&imu, tau).unwrap().gyro);
+            worst = worst.max(relation_residual(residual_at, tau, window));
             // The increment's own window does not fit the residual.
-            let increment = [GyroWindow::at(&imu, tau, delta).unwrap()];
-            plain = plain.min(increment_gyro_l1(&out, &increment, 1.0, &mut g));
+            let increment = GyroWindow::at(&imu, tau, delta).unwrap();
+            plain = plain.min(relation_residual(residual_at, tau, increment));
         }
         // The readings integrated by the trapezoid rule at 1 kHz, a central difference of 1 ms.
         assert!(worst < 1e-3, "{worst}");
