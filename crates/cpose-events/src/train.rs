@@ -456,7 +456,7 @@ impl<'a> EventTrainer<'a> {
             &self.settings,
             &self.rays,
             &self.grad_out,
-            &mut self.grad_params,
+            Some(&mut self.grad_params),
             trainable.then_some(&mut self.pose_grads[..]),
         );
         self.optimizer.step(&mut *self.field, &self.grad_params, it);

@@ -300,7 +300,15 @@ impl NeuralMap {
             }
             self.cotangents.push(g);
         }
-        self.backward(None);
+        self.grad_params.fill(0.0);
+        self.renderer.backward(
+            &mut self.field,
+            &self.settings,
+            &self.rays,
+            &self.cotangents,
+            Some(&mut self.grad_params),
+            None,
+        );
         self.adam.begin_step();
         let params = self.field.params_mut();
         for (range, lr) in &self.groups {
@@ -371,26 +379,20 @@ impl NeuralMap {
             }
             self.cotangents.push(g);
         }
-        self.backward(Some(pose_grads));
+        // The field is held fixed: only the points' gradient is taken.
+        self.renderer.backward(
+            &mut self.field,
+            &self.settings,
+            &self.rays,
+            &self.cotangents,
+            None,
+            Some(pose_grads),
+        );
         loss
     }
 
     /// The median depth error `|D̂ − D|` of the last [`NeuralMap::tracking_loss`], metres.
     pub fn depth_error(&self) -> f64 {
         self.depth_error
-    }
-
-    /// The reverse pass of the last render from `self.cotangents`: the field's gradient into
-    /// `grad_params` (cleared first) and, if given, each camera's pose gradient.
-    fn backward(&mut self, pose_grads: Option<&mut [PoseGradient]>) {
-        self.grad_params.fill(0.0);
-        self.renderer.backward(
-            &mut self.field,
-            &self.settings,
-            &self.rays,
-            &self.cotangents,
-            &mut self.grad_params,
-            pose_grads,
-        );
     }
 }

@@ -310,12 +310,36 @@ impl<S: Real> Mlp<S> {
         grad_out: &[S],
         grad: &mut [S],
         accum: Accum,
+        input_grad: Option<&mut [S]>,
+    ) {
+        assert!(grad.len() == self.params.len(), "gradient length");
+        self.reverse(input, ws, grad_out, Some((grad, accum)), input_grad);
+    }
+
+    /// [`Mlp::backward`] without `∂L/∂θ`: adds only `∂L/∂input` into `input_grad` (the
+    /// parameters held fixed, e.g. a pose tracked against a trained map).
+    pub fn backward_input(
+        &self,
+        input: &[S],
+        ws: &mut MlpWorkspace<S>,
+        grad_out: &[S],
+        input_grad: &mut [S],
+    ) {
+        self.reverse(input, ws, grad_out, None, Some(input_grad));
+    }
+
+    /// The reverse pass of [`Mlp::backward`], `∂L/∂θ` only when `grad` is given.
+    fn reverse(
+        &self,
+        input: &[S],
+        ws: &mut MlpWorkspace<S>,
+        grad_out: &[S],
+        mut grad: Option<(&mut [S], Accum)>,
         mut input_grad: Option<&mut [S]>,
     ) {
         let (b, streams) = (ws.b, ws.streams);
         let rows = streams * b;
         let nl = self.layers.len();
-        assert!(grad.len() == self.params.len(), "gradient length");
         assert!(
             grad_out.len() >= rows * self.spec.output_dim,
             "output gradient length"
@@ -349,37 +373,42 @@ impl<S: Real> Mlp<S> {
                 }
                 &ws.g[..rows * out]
             };
-            // Bias: Σ over the value rows.
-            let gb = &mut grad[layer.bias_offset()..layer.end()];
-            for (c, gbc) in gb.iter_mut().enumerate() {
-                let s: S = gz[c * rows..c * rows + b].iter().copied().sum();
-                match accum {
-                    Accum::Replace => *gbc = s,
-                    Accum::Add => *gbc += s,
-                }
-            }
             let gzm = mat(gz, rows, out);
-            let gw_slice = &mut grad[layer.offset..layer.bias_offset()];
-            let mut gw = mat_mut(gw_slice, layer.fan_in(), out);
-            if layer.from_h > 0 {
-                let hp = mat(&ws.h[l - 1], rows, layer.from_h);
-                matmul(
-                    gw.as_mut().subrows_mut(0, layer.from_h),
-                    accum,
-                    hp.transpose(),
-                    gzm,
-                    S::ONE,
-                    Par::Seq,
-                );
-            }
-            if layer.from_x > 0 {
-                let gwx = gw.as_mut().subrows_mut(layer.from_h, layer.from_x);
-                matmul(gwx, accum, x.transpose(), gzm, S::ONE, Par::Seq);
-                if let Some(gi) = input_grad.as_deref_mut() {
-                    let gi = mat_mut(gi, rows, self.spec.input_dim);
-                    let wx = self.weights(&layer).subrows(layer.from_h, layer.from_x);
-                    matmul(gi, Accum::Add, gzm, wx.transpose(), S::ONE, Par::Seq);
+            if let Some((grad, accum)) = grad.as_mut() {
+                let accum = *accum;
+                // Bias: Σ over the value rows.
+                let gb = &mut grad[layer.bias_offset()..layer.end()];
+                for (c, gbc) in gb.iter_mut().enumerate() {
+                    let s: S = gz[c * rows..c * rows + b].iter().copied().sum();
+                    match accum {
+                        Accum::Replace => *gbc = s,
+                        Accum::Add => *gbc += s,
+                    }
                 }
+                let gw_slice = &mut grad[layer.offset..layer.bias_offset()];
+                let mut gw = mat_mut(gw_slice, layer.fan_in(), out);
+                if layer.from_h > 0 {
+                    let hp = mat(&ws.h[l - 1], rows, layer.from_h);
+                    matmul(
+                        gw.as_mut().subrows_mut(0, layer.from_h),
+                        accum,
+                        hp.transpose(),
+                        gzm,
+                        S::ONE,
+                        Par::Seq,
+                    );
+                }
+                if layer.from_x > 0 {
+                    let gwx = gw.as_mut().subrows_mut(layer.from_h, layer.from_x);
+                    matmul(gwx, accum, x.transpose(), gzm, S::ONE, Par::Seq);
+                }
+            }
+            if layer.from_x > 0
+                && let Some(gi) = input_grad.as_deref_mut()
+            {
+                let gi = mat_mut(gi, rows, self.spec.input_dim);
+                let wx = self.weights(&layer).subrows(layer.from_h, layer.from_x);
+                matmul(gi, Accum::Add, gzm, wx.transpose(), S::ONE, Par::Seq);
             }
             if layer.from_h > 0 {
                 let wh = self.weights(&layer).subrows(0, layer.from_h);
@@ -626,6 +655,10 @@ mod tests {
                     gx[k]
                 );
             }
+            // The input gradient alone is the same, bit for bit.
+            let mut gx_only = vec![0.0; x.len()];
+            mlp.backward_input(&x, &mut ws, &c, &mut gx_only);
+            assert_eq!(gx_only, gx, "{act:?} backward_input");
             // Accumulation adds onto what is there.
             let mut grad2 = grad.clone();
             mlp.backward(&x, &mut ws, &c, &mut grad2, Accum::Add, None);

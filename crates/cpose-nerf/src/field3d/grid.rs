@@ -590,15 +590,14 @@ impl<S: Real> HashGridField<S> {
         }
     }
 
-    /// Heads and MLP reverse pass of one part: `∂L/∂θ_mlp` into `g` (`accum`) and the
-    /// network-input gradient into `part.grad_enc`.
+    /// Heads and MLP reverse pass of one part: `∂L/∂θ_mlp` into `g` (`accum`; skipped when
+    /// `None`) and the network-input gradient into `part.grad_enc`.
     fn backward_mlp_part(
         &self,
         part: &mut Part<S>,
         grad_sigma: &[S],
         grad_rgb: &[S],
-        g: &mut [S],
-        accum: Accum,
+        mut g: Option<(&mut [S], Accum)>,
     ) {
         let (b, start) = (part.b, part.start);
         let dim = self.input_dim();
@@ -618,29 +617,32 @@ impl<S: Real> HashGridField<S> {
                 len,
                 &mut gz[len..],
             );
-            // The first chunk writes or adds as asked; the others add.
-            self.mlp.backward(
+            let (enc, grad_enc) = (
                 &part.enc[r.start * dim..r.end * dim],
-                ws,
-                gz,
-                g,
-                if k == 0 { accum } else { Accum::Add },
-                Some(&mut part.grad_enc[r.start * dim..r.end * dim]),
+                &mut part.grad_enc[r.start * dim..r.end * dim],
             );
+            match g.as_mut() {
+                // The first chunk writes or adds as asked; the others add.
+                Some((g, accum)) => {
+                    let accum = if k == 0 { *accum } else { Accum::Add };
+                    self.mlp.backward(enc, ws, gz, g, accum, Some(grad_enc));
+                }
+                None => self.mlp.backward_input(enc, ws, gz, grad_enc),
+            }
         }
     }
 
     /// Grid reverse pass of `levels` over all points of `parts`: scatter-adds `∂L/∂v` into
-    /// `grad` (the grid gradient from parameter `grad_start` on, up to the end of the last
-    /// level) and writes level `l`'s `∂L/∂p` into `grad_p[l − levels.start]` (`n × 3`). Splits
-    /// the levels in halves recursively and, when `parallel`, runs the halves with
-    /// `rayon::join`, so idle threads steal whole levels: every level writes only its own slice
-    /// of the gradient and its own point-gradient buffer, and results do not depend on the
-    /// schedule.
+    /// `grad` when given (the grid gradient from parameter `grad_start` on, up to the end of
+    /// the last level) and writes level `l`'s `∂L/∂p` into `grad_p[l − levels.start]`
+    /// (`n × 3`). Splits the levels in halves recursively and, when `parallel`, runs the halves
+    /// with `rayon::join`, so idle threads steal whole levels: every level writes only its own
+    /// slice of the gradient and its own point-gradient buffer, and results do not depend on
+    /// the schedule.
     fn backward_levels(
         &self,
         levels: Range<usize>,
-        grad: &mut [S],
+        grad: Option<&mut [S]>,
         grad_start: usize,
         grad_p: &mut [Vec<S>],
         parts: &[Part<S>],
@@ -658,24 +660,35 @@ impl<S: Real> HashGridField<S> {
                 grow(gp, 3 * n);
                 gp[..3 * n].fill(S::ZERO);
                 let gp = &mut gp[..3 * n];
-                match self.config.features {
-                    1 => self.backward_level::<1>(l, parts, grad, gp),
-                    2 => self.backward_level::<2>(l, parts, grad, gp),
-                    4 => self.backward_level::<4>(l, parts, grad, gp),
-                    8 => self.backward_level::<8>(l, parts, grad, gp),
-                    _ => self.backward_level::<0>(l, parts, grad, gp),
+                match (self.config.features, grad) {
+                    (1, Some(g)) => self.backward_level::<1, true>(l, parts, g, gp),
+                    (2, Some(g)) => self.backward_level::<2, true>(l, parts, g, gp),
+                    (4, Some(g)) => self.backward_level::<4, true>(l, parts, g, gp),
+                    (8, Some(g)) => self.backward_level::<8, true>(l, parts, g, gp),
+                    (_, Some(g)) => self.backward_level::<0, true>(l, parts, g, gp),
+                    (1, None) => self.backward_level::<1, false>(l, parts, &mut [], gp),
+                    (2, None) => self.backward_level::<2, false>(l, parts, &mut [], gp),
+                    (4, None) => self.backward_level::<4, false>(l, parts, &mut [], gp),
+                    (8, None) => self.backward_level::<8, false>(l, parts, &mut [], gp),
+                    (_, None) => self.backward_level::<0, false>(l, parts, &mut [], gp),
                 }
             }
             len => {
                 let (start, end) = (levels.start, levels.end);
                 let mid = start + len / 2;
                 let split = self.levels[mid].offset;
-                let (left, right) = grad.split_at_mut(split - grad_start);
+                let (left, right) = match grad {
+                    Some(g) => {
+                        let (left, right) = g.split_at_mut(split - grad_start);
+                        (Some(left), Some(right))
+                    }
+                    None => (None, None),
+                };
                 let (gp_left, gp_right) = grad_p.split_at_mut(mid - start);
-                let mut run_left = move || {
+                let run_left = move || {
                     self.backward_levels(start..mid, left, grad_start, gp_left, parts, parallel)
                 };
-                let mut run_right =
+                let run_right =
                     move || self.backward_levels(mid..end, right, split, gp_right, parts, parallel);
                 if parallel {
                     rayon::join(run_left, run_right);
@@ -688,9 +701,9 @@ impl<S: Real> HashGridField<S> {
     }
 
     /// Reverse pass of level `l` over all points of `parts`: scatter-adds `∂L/∂v` into the
-    /// level's gradient `gtable` and adds `∂L/∂p` into `grad_p` (`n × 3`). `F` as in
-    /// [`HashGridField::encode_level`].
-    fn backward_level<const F: usize>(
+    /// level's gradient `gtable` when `PARAMS` (else `gtable` is not touched) and adds `∂L/∂p`
+    /// into `grad_p` (`n × 3`). `F` as in [`HashGridField::encode_level`].
+    fn backward_level<const F: usize, const PARAMS: bool>(
         &self,
         l: usize,
         parts: &[Part<S>],
@@ -722,13 +735,18 @@ impl<S: Real> HashGridField<S> {
                 let mut dot = [S::ZERO; 8];
                 for c in 0..8 {
                     let e = cell.corners[c] * nf;
-                    let (v, gv) = (&table[e..e + nf], &mut gtable[e..e + nf]);
+                    let v = &table[e..e + nf];
                     let mut d = S::ZERO;
                     for f in 0..nf {
-                        gv[f] += cw[c] * gf[f];
                         d += gf[f] * v[f];
                     }
                     dot[c] = d;
+                    if PARAMS {
+                        let gv = &mut gtable[e..e + nf];
+                        for f in 0..nf {
+                            gv[f] += cw[c] * gf[f];
+                        }
+                    }
                 }
                 // ∂f/∂t_x = Σ_{y,z} w_y w_z (v_{1yz} − v_{0yz}), likewise for y and z.
                 let [tx, ty, tz] = cell.t;
@@ -811,24 +829,60 @@ impl<S: Real> RadianceField<S> for HashGridField<S> {
         grad: &mut [S],
         grad_points: &mut [S],
     ) {
-        let (n, used) = (self.ws.n, self.ws.used);
         check_backward(
-            n,
+            self.ws.n,
             self.params.len(),
             grad_sigma,
             grad_rgb,
             grad,
             grad_points,
         );
-        let mut ws = std::mem::take(&mut self.ws);
-        let (grad_grid, grad_mlp) = grad.split_at_mut(self.grid_len);
-        let this = &*self;
-        backward_parts(
-            &mut ws.parts[..used],
-            grad_mlp,
-            |part| &mut part.grad,
-            |part, g, accum| this.backward_mlp_part(part, grad_sigma, grad_rgb, g, accum),
+        self.reverse(grad_sigma, grad_rgb, Some(grad), grad_points);
+    }
+
+    fn backward_points(&mut self, grad_sigma: &[S], grad_rgb: &[S], grad_points: &mut [S]) {
+        let n = self.ws.n;
+        assert!(
+            grad_sigma.len() == n && grad_rgb.len() == 3 * n && grad_points.len() == 3 * n,
+            "backward_points: cotangents and point gradient must match the last forward"
         );
+        self.reverse(grad_sigma, grad_rgb, None, grad_points);
+    }
+}
+
+impl<S: Real> HashGridField<S> {
+    /// The reverse pass of [`RadianceField::backward`]; the parameter gradient (its grid
+    /// scatter and the MLP's weight products) only when `grad` is given.
+    fn reverse(
+        &mut self,
+        grad_sigma: &[S],
+        grad_rgb: &[S],
+        grad: Option<&mut [S]>,
+        grad_points: &mut [S],
+    ) {
+        let used = self.ws.used;
+        let mut ws = std::mem::take(&mut self.ws);
+        let this = &*self;
+        let grad_grid = match grad {
+            Some(grad) => {
+                let (grad_grid, grad_mlp) = grad.split_at_mut(self.grid_len);
+                backward_parts(
+                    &mut ws.parts[..used],
+                    grad_mlp,
+                    |part| &mut part.grad,
+                    |part, g, accum| {
+                        this.backward_mlp_part(part, grad_sigma, grad_rgb, Some((g, accum)))
+                    },
+                );
+                Some(grad_grid)
+            }
+            None => {
+                run_parts(&mut ws.parts[..used], |_, part| {
+                    this.backward_mlp_part(part, grad_sigma, grad_rgb, None)
+                });
+                None
+            }
+        };
         let nl = self.levels.len();
         ws.level_grad_p.resize_with(nl, Vec::new);
         let Workspace {
@@ -1182,6 +1236,32 @@ mod tests {
             a.param_groups(),
             [("grid", a.grid_range()), ("mlp", a.mlp_range())]
         );
+    }
+
+    /// With the parameters held fixed the points' gradient is the full pass's, bit for bit, in
+    /// one part and in two (5000 points), and the parameters' gradient is not touched.
+    #[test]
+    fn points_gradient_alone_matches_the_full_pass() {
+        for n in [40, 5000] {
+            let mut field = small().init::<f64>(scene(true)).expect("valid");
+            randomise_grid(&mut field, 9);
+            field.set_progress(0.6);
+            let pts = points(n, 3, scene(true).centre, 3.0, |_| false);
+            let (mut sigma, mut rgb) = (vec![0.0; n], vec![0.0; 3 * n]);
+            field.forward(&pts, &mut sigma, &mut rgb);
+            let gs: Vec<f64> = (0..n).map(|i| (i % 7) as f64 * 0.1 - 0.3).collect();
+            let gc: Vec<f64> = (0..3 * n).map(|i| (i % 5) as f64 * 0.2 - 0.4).collect();
+            let mut grad = vec![0.0; field.num_params()];
+            let mut full = vec![0.0; 3 * n];
+            field.backward(&gs, &gc, &mut grad, &mut full);
+            let mut alone = vec![f64::NAN; 3 * n];
+            field.backward_points(&gs, &gc, &mut alone);
+            assert_eq!(alone, full, "{n} points");
+            assert!(
+                full.iter().any(|&g| g != 0.0),
+                "a zero gradient tests nothing"
+            );
+        }
     }
 
     /// f32 and f64 fields with the same parameters agree (forward to 1e-5; backward relative

@@ -96,6 +96,13 @@ pub trait RadianceField<S: Real = f32>: Send {
     /// Reverse pass of the last `forward`: ADDS ∂L/∂θ into `grad` (len `num_params`) and WRITES
     /// ∂L/∂points into `grad_points` (`n × 3`), given ∂L/∂σ (`n`) and ∂L/∂rgb (`n × 3`).
     fn backward(&mut self, grad_sigma: &[S], grad_rgb: &[S], grad: &mut [S], grad_points: &mut [S]);
+    /// [`RadianceField::backward`] with the parameters held fixed: WRITES only ∂L/∂points (a
+    /// camera tracked against a trained field). The default runs the full pass into a scratch
+    /// gradient; a field overrides it to skip the parameter gradient's work.
+    fn backward_points(&mut self, grad_sigma: &[S], grad_rgb: &[S], grad_points: &mut [S]) {
+        let mut scratch = vec![S::ZERO; self.num_params()];
+        self.backward(grad_sigma, grad_rgb, &mut scratch, grad_points);
+    }
 }
 
 /// Invalid construction parameters of a 3-D field or its scene bounds.

@@ -43,7 +43,6 @@ pub fn refine_pose(
     let mut adam = Adam::<f64>::new(6);
     let mut rays = Vec::with_capacity(refinement.rays);
     let mut grads = Vec::with_capacity(refinement.rays);
-    let mut sink = vec![0.0f32; field.num_params()];
     let current = |delta: &[f64; 6]| pose * se3_exp(&Vector6::from_column_slice(delta));
     for _ in 0..refinement.iterations {
         let now = current(&delta);
@@ -66,14 +65,7 @@ pub fn refine_pose(
             g
         }));
         let mut pose_grad = [PoseGradient::new()];
-        renderer.backward(
-            field,
-            settings,
-            &rays,
-            &grads,
-            &mut sink,
-            Some(&mut pose_grad),
-        );
+        renderer.backward(field, settings, &rays, &grads, None, Some(&mut pose_grad));
         let g = pose_grad[0].right_se3(&now);
         adam.step(&mut delta, g.as_slice(), refinement.lr);
     }

@@ -209,7 +209,7 @@ impl<'a> Trainer<'a> {
             &self.settings,
             &self.rays,
             &self.grad_out,
-            &mut self.grad_params,
+            Some(&mut self.grad_params),
             trainable.then_some(&mut self.pose_grads[..]),
         );
         self.optimizer

@@ -334,15 +334,16 @@ impl<S: Real> Renderer<S> {
     }
 
     /// Reverse pass of the last [`Renderer::forward`] from the cotangents `grad` of its outputs:
-    /// adds the field's parameter gradient into `grad_params` and, when `pose_grads` is given
-    /// (one per camera), each ray's contribution to its camera's pose gradient.
+    /// adds the field's parameter gradient into `grad_params` when given (`None`: the field is
+    /// held fixed, [`RadianceField::backward_points`]) and, when `pose_grads` is given (one per
+    /// camera), each ray's contribution to its camera's pose gradient.
     pub fn backward(
         &mut self,
         field: &mut dyn RadianceField<S>,
         settings: &RenderSettings,
         rays: &[CameraRay],
         grad: &[Composited<S>],
-        grad_params: &mut [S],
+        grad_params: Option<&mut [S]>,
         pose_grads: Option<&mut [PoseGradient]>,
     ) {
         let (n, k) = (rays.len(), settings.samples);
@@ -386,7 +387,10 @@ impl<S: Real> Renderer<S> {
             }
         }
         let grad_points = grow(&mut self.grad_points, 3 * n * k);
-        field.backward(grad_sigma, grad_rgb, grad_params, grad_points);
+        match grad_params {
+            Some(grad_params) => field.backward(grad_sigma, grad_rgb, grad_params, grad_points),
+            None => field.backward_points(grad_sigma, grad_rgb, grad_points),
+        }
         let Some(pose_grads) = pose_grads else {
             return;
         };
@@ -598,7 +602,18 @@ mod tests {
         }
         let mut sink = vec![0.0; field.num_params()];
         let mut pg = [PoseGradient::new()];
-        renderer.backward(field, &settings, &rays, &cot, &mut sink, Some(&mut pg));
+        renderer.backward(
+            field,
+            &settings,
+            &rays,
+            &cot,
+            Some(&mut sink),
+            Some(&mut pg),
+        );
+        // Holding the field fixed gives the same pose gradient, bit for bit.
+        let mut fixed = [PoseGradient::new()];
+        renderer.backward(field, &settings, &rays, &cot, None, Some(&mut fixed));
+        assert_eq!(fixed[0].right_se3(pose), pg[0].right_se3(pose));
         (l, pg[0].right_se3(pose))
     }
 
