@@ -17,6 +17,7 @@ use crate::data::{DepthImage, RgbdFrame};
 use crate::map::{NeuralMap, PixelSample};
 use crate::track::PoseModel;
 use cpose_core::checkpoint::{Reader, Writer};
+use cpose_core::geometry::rotation_angle_between;
 use cpose_nerf::mesh::{Grid, Mesh};
 
 /// Tracking settings; `[tracking]` in a config.
@@ -38,6 +39,14 @@ pub struct TrackingConfig {
     /// A frame whose median depth error `|D̂ − D|` at the chosen pose exceeds this (metres) is
     /// reported lost: the map does not explain it (a track that drifts off slowly).
     pub lost_depth_error: f64,
+    /// Tracking stops before `iterations` once the pose has settled: it moved less than
+    /// `settle_translation` and `settle_rotation_deg` over the last `settle_window` steps. 0
+    /// runs every iteration (NICE-SLAM).
+    pub settle_window: usize,
+    /// Metres; see `settle_window`.
+    pub settle_translation: f64,
+    /// Degrees; see `settle_window`.
+    pub settle_rotation_deg: f64,
 }
 
 impl TrackingConfig {
@@ -48,6 +57,8 @@ impl TrackingConfig {
             ("rotation_lr_factor", self.rotation_lr_factor),
             ("lost_translation", self.lost_translation),
             ("lost_depth_error", self.lost_depth_error),
+            ("settle_translation", self.settle_translation),
+            ("settle_rotation_deg", self.settle_rotation_deg),
         ];
         for (key, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -71,6 +82,9 @@ impl Default for TrackingConfig {
             rotation_lr_factor: 1.0,
             lost_translation: 0.5,
             lost_depth_error: 0.2,
+            settle_window: 0,
+            settle_translation: 0.005,
+            settle_rotation_deg: 0.1,
         }
     }
 }
@@ -124,6 +138,9 @@ pub struct TrackReport {
     /// A lost frame whose start was measured ([`PoseModel::start_is_measured`]): its estimate is
     /// the start instead of the lost track, and it is left out of the map.
     pub recovered: bool,
+    /// Tracking steps taken ([`TrackingConfig::settle_window`] may stop before
+    /// [`TrackingConfig::iterations`]).
+    pub iterations: usize,
 }
 
 /// The state of one SLAM run.
@@ -347,8 +364,17 @@ impl Slam {
         let mut rng = self.rng(index, 1);
         let mut best = (f64::INFINITY, start, 0.0);
         self.pose_grads.resize(1, PoseGradient::new());
+        let window = self.tracking.settle_window;
+        let mut path = Vec::with_capacity(self.tracking.iterations);
+        let mut iterations = 0;
         for _ in 0..self.tracking.iterations {
             let body = model.pose();
+            if window > 0 && path.len() >= window && self.settled(&path[path.len() - window], &body)
+            {
+                break;
+            }
+            path.push(body);
+            iterations += 1;
             let pose = body * mount;
             let edge = self.tracking.edge;
             sample_pixels(
@@ -396,7 +422,15 @@ impl Slam {
             depth_error,
             lost,
             recovered,
+            iterations,
         })
+    }
+
+    /// Whether the pose moved less than the settle thresholds from `before` to `now`.
+    fn settled(&self, before: &Isometry3<f64>, now: &Isometry3<f64>) -> bool {
+        let moved = (now.translation.vector - before.translation.vector).norm();
+        let turned = rotation_angle_between(&before.rotation, &now.rotation).to_degrees();
+        moved < self.tracking.settle_translation && turned < self.tracking.settle_rotation_deg
     }
 
     /// Trains the map on a window: random earlier keyframes, the last keyframe and `frame`.
@@ -651,6 +685,65 @@ mod tests {
                 (estimate.translation.vector - kept.translation.vector).norm() < 1e-12,
                 "{measured}: {estimate:?}"
             );
+        }
+    }
+
+    /// Moves 1 cm along x per tracking step for eight steps, then stays.
+    struct Walking {
+        start: Isometry3<f64>,
+        steps: usize,
+    }
+
+    impl PoseModel for Walking {
+        fn begin(
+            &mut self,
+            _: usize,
+            _: f64,
+            _: &[Isometry3<f64>],
+        ) -> anyhow::Result<Isometry3<f64>> {
+            self.steps = 0;
+            Ok(self.start)
+        }
+        fn pose(&self) -> Isometry3<f64> {
+            self.start * Isometry3::translation(0.01 * self.steps.min(8) as f64, 0.0, 0.0)
+        }
+        fn step(&mut self, _: &Quaternion<f64>, _: &Vector3<f64>) -> anyhow::Result<()> {
+            self.steps += 1;
+            Ok(())
+        }
+        fn finish(&mut self, _: usize, _: f64, _: &Isometry3<f64>) -> anyhow::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// With a settle window of 5 steps and 5 mm, tracking stops once the pose has not moved for
+    /// five steps (step 13: 8 moving steps, then five still); without one it runs all 20.
+    #[test]
+    fn tracking_stops_once_the_pose_has_settled() {
+        let (config, camera, poses) = walk(2);
+        let mapping = MappingConfig {
+            first_iterations: 5,
+            ..MappingConfig::default()
+        };
+        for (window, expected) in [(5, 13), (0, 20)] {
+            let tracking = TrackingConfig {
+                iterations: 20,
+                settle_window: window,
+                ..TrackingConfig::default()
+            };
+            let mut slam = room_slam(camera, &tracking, &mapping);
+            let frame = |i: usize| room_frame(&config, &camera, &poses[i], i);
+            slam.process(frame(0), poses[0], &mut Fixed(poses[0]))
+                .unwrap();
+            let mut model = Walking {
+                start: poses[1],
+                steps: 0,
+            };
+            let report = slam
+                .process(frame(1), poses[0], &mut model)
+                .unwrap()
+                .unwrap();
+            assert_eq!(report.iterations, expected, "window {window}");
         }
     }
 

@@ -1,7 +1,12 @@
 //! Adam (Kingma & Ba) exactly as PyTorch's `torch.optim.Adam` (no weight decay, no amsgrad), and
 //! the exponential learning-rate decay of the paper's code (docs/methods.md §1.2).
 
+use rayon::prelude::*;
+
 use crate::{ParamKind, PoseField, Real};
+
+/// Parameters per task when a large group's update is split over threads.
+const PARALLEL_CHUNK: usize = 1 << 15;
 
 /// Adam state over one flat parameter vector; parameter groups are ranges of it with their own
 /// learning rates.
@@ -88,10 +93,23 @@ impl<S: Real> Adam<S> {
         let (c1, c2) = (S::ONE - b1, S::ONE - b2);
         let m = &mut self.m[offset..offset + n];
         let v = &mut self.v[offset..offset + n];
-        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m).zip(v) {
-            *m = b1 * *m + c1 * g;
-            *v = b2 * *v + c2 * g * g;
-            *p -= step * *m / (v.sqrt() * inv_sqrt_bc2 + eps);
+        let update = |params: &mut [S], grads: &[S], m: &mut [S], v: &mut [S]| {
+            for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m).zip(v) {
+                *m = b1 * *m + c1 * g;
+                *v = b2 * *v + c2 * g * g;
+                *p -= step * *m / (v.sqrt() * inv_sqrt_bc2 + eps);
+            }
+        };
+        // Element by element, so a large group is split over the threads with the same result.
+        if n < PARALLEL_CHUNK * 2 {
+            update(params, grads, m, v);
+        } else {
+            params
+                .par_chunks_mut(PARALLEL_CHUNK)
+                .zip(grads.par_chunks(PARALLEL_CHUNK))
+                .zip(m.par_chunks_mut(PARALLEL_CHUNK))
+                .zip(v.par_chunks_mut(PARALLEL_CHUNK))
+                .for_each(|(((p, g), m), v)| update(p, g, m, v));
         }
     }
 
@@ -193,6 +211,35 @@ mod tests {
         let mut q = [1.0];
         adam.step(&mut q, &[0.5], 0.1);
         assert!((q[0] - 0.900000002).abs() < 1e-12 && adam.steps() == 1);
+    }
+
+    /// A group large enough to be split over threads (2.5 chunks, the last one short, at an
+    /// offset) steps every element as a group of one does.
+    #[test]
+    fn a_split_group_steps_like_single_elements() {
+        let n = PARALLEL_CHUNK * 5 / 2 + 7;
+        let grads: Vec<f32> = (0..n)
+            .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.01)
+            .collect();
+        let mut big = Adam::<f32>::new(n + 3);
+        let mut params: Vec<f32> = (0..n).map(|i| (i % 13) as f32 * 0.1).collect();
+        let start = params.clone();
+        for _ in 0..2 {
+            big.begin_step();
+            big.update(3, &mut params, &grads, 0.01);
+        }
+        for i in (0..n)
+            .step_by(997)
+            .chain([PARALLEL_CHUNK - 1, PARALLEL_CHUNK, n - 1])
+        {
+            let mut one = Adam::<f32>::new(1);
+            let mut p = [start[i]];
+            for _ in 0..2 {
+                one.step(&mut p, &grads[i..=i], 0.01);
+            }
+            assert_eq!(p[0], params[i], "element {i}");
+        }
+        assert_ne!(params, start);
     }
 
     #[test]
