@@ -17,7 +17,6 @@ use crate::data::{DepthImage, RgbdFrame};
 use crate::map::{NeuralMap, PixelSample};
 use crate::track::PoseModel;
 use cpose_core::checkpoint::{Reader, Writer};
-use cpose_core::geometry::rotation_angle_between;
 use cpose_nerf::mesh::{Grid, Mesh};
 
 /// Tracking settings; `[tracking]` in a config.
@@ -39,14 +38,12 @@ pub struct TrackingConfig {
     /// A frame whose median depth error `|D̂ − D|` at the chosen pose exceeds this (metres) is
     /// reported lost: the map does not explain it (a track that drifts off slowly).
     pub lost_depth_error: f64,
-    /// Tracking stops before `iterations` once the pose has settled: it moved less than
-    /// `settle_translation` and `settle_rotation_deg` over the last `settle_window` steps. 0
-    /// runs every iteration (NICE-SLAM).
+    /// Tracking stops before `iterations` once its loss has levelled off: the mean loss of the
+    /// last `settle_window` steps is less than `settle_tolerance` (a fraction) below the mean of
+    /// the window before. 0 runs every iteration (NICE-SLAM).
     pub settle_window: usize,
-    /// Metres; see `settle_window`.
-    pub settle_translation: f64,
-    /// Degrees; see `settle_window`.
-    pub settle_rotation_deg: f64,
+    /// See `settle_window`.
+    pub settle_tolerance: f64,
 }
 
 impl TrackingConfig {
@@ -57,8 +54,7 @@ impl TrackingConfig {
             ("rotation_lr_factor", self.rotation_lr_factor),
             ("lost_translation", self.lost_translation),
             ("lost_depth_error", self.lost_depth_error),
-            ("settle_translation", self.settle_translation),
-            ("settle_rotation_deg", self.settle_rotation_deg),
+            ("settle_tolerance", self.settle_tolerance),
         ];
         for (key, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -83,8 +79,7 @@ impl Default for TrackingConfig {
             lost_translation: 0.5,
             lost_depth_error: 0.2,
             settle_window: 0,
-            settle_translation: 0.005,
-            settle_rotation_deg: 0.1,
+            settle_tolerance: 0.01,
         }
     }
 }
@@ -364,17 +359,16 @@ impl Slam {
         let mut rng = self.rng(index, 1);
         let mut best = (f64::INFINITY, start, 0.0);
         self.pose_grads.resize(1, PoseGradient::new());
-        let window = self.tracking.settle_window;
-        let mut path = Vec::with_capacity(self.tracking.iterations);
-        let mut iterations = 0;
+        let mut losses = Vec::with_capacity(self.tracking.iterations);
         for _ in 0..self.tracking.iterations {
-            let body = model.pose();
-            if window > 0 && path.len() >= window && self.settled(&path[path.len() - window], &body)
-            {
+            if levelled_off(
+                &losses,
+                self.tracking.settle_window,
+                self.tracking.settle_tolerance,
+            ) {
                 break;
             }
-            path.push(body);
-            iterations += 1;
+            let body = model.pose();
             let pose = body * mount;
             let edge = self.tracking.edge;
             sample_pixels(
@@ -397,6 +391,7 @@ impl Slam {
             if !loss.is_finite() {
                 anyhow::bail!("tracking loss is {loss} at frame {index}");
             }
+            losses.push(loss);
             if loss < best.0 {
                 best = (loss, body, self.map.depth_error());
                 model.keep_best();
@@ -422,15 +417,8 @@ impl Slam {
             depth_error,
             lost,
             recovered,
-            iterations,
+            iterations: losses.len(),
         })
-    }
-
-    /// Whether the pose moved less than the settle thresholds from `before` to `now`.
-    fn settled(&self, before: &Isometry3<f64>, now: &Isometry3<f64>) -> bool {
-        let moved = (now.translation.vector - before.translation.vector).norm();
-        let turned = rotation_angle_between(&before.rotation, &now.rotation).to_degrees();
-        moved < self.tracking.settle_translation && turned < self.tracking.settle_rotation_deg
     }
 
     /// Trains the map on a window: random earlier keyframes, the last keyframe and `frame`.
@@ -478,6 +466,18 @@ impl Slam {
             }
         }
     }
+}
+
+/// Whether the tracking `losses` so far have levelled off: the mean of the last `window` is less
+/// than `tolerance` below the mean of the `window` before ([`TrackingConfig::settle_window`];
+/// never when `window` is 0).
+fn levelled_off(losses: &[f64], window: usize, tolerance: f64) -> bool {
+    if window == 0 || losses.len() < 2 * window {
+        return false;
+    }
+    let mean = |l: &[f64]| l.iter().sum::<f64>() / l.len() as f64;
+    let (before, last) = losses[losses.len() - 2 * window..].split_at(window);
+    mean(last) > (1.0 - tolerance) * mean(before)
 }
 
 /// Samples up to `n` pixels with a depth reading, uniformly inside the `edge` border, as rays
@@ -688,59 +688,42 @@ mod tests {
         }
     }
 
-    /// Moves 1 cm along x per tracking step for eight steps, then stays.
-    struct Walking {
-        start: Isometry3<f64>,
-        steps: usize,
-    }
-
-    impl PoseModel for Walking {
-        fn begin(
-            &mut self,
-            _: usize,
-            _: f64,
-            _: &[Isometry3<f64>],
-        ) -> anyhow::Result<Isometry3<f64>> {
-            self.steps = 0;
-            Ok(self.start)
-        }
-        fn pose(&self) -> Isometry3<f64> {
-            self.start * Isometry3::translation(0.01 * self.steps.min(8) as f64, 0.0, 0.0)
-        }
-        fn step(&mut self, _: &Quaternion<f64>, _: &Vector3<f64>) -> anyhow::Result<()> {
-            self.steps += 1;
-            Ok(())
-        }
-        fn finish(&mut self, _: usize, _: f64, _: &Isometry3<f64>) -> anyhow::Result<()> {
-            Ok(())
-        }
-    }
-
-    /// With a settle window of 5 steps and 5 mm, tracking stops once the pose has not moved for
-    /// five steps (step 13: 8 moving steps, then five still); without one it runs all 20.
+    /// A loss that still falls by 2% a step has not levelled off; one that stopped falling has,
+    /// once two windows are in; a window of 0 never stops.
     #[test]
-    fn tracking_stops_once_the_pose_has_settled() {
+    fn the_loss_levels_off_after_two_flat_windows() {
+        let falling: Vec<f64> = (0..40).map(|k| 0.98f64.powi(k)).collect();
+        assert!((6..=40).all(|n| !levelled_off(&falling[..n], 3, 0.01)));
+        let mut flat = falling[..10].to_vec();
+        flat.extend([falling[9]; 10]);
+        let stop = (1..=20).find(|&n| levelled_off(&flat[..n], 3, 0.01));
+        // Windows 8..11 and 11..14: the first holds one more falling step, only 0.7% above.
+        assert_eq!(stop, Some(14));
+        assert!(!levelled_off(&flat, 0, 0.01));
+    }
+
+    /// Tracking from the true pose with a model that cannot move: the loss is flat, so a settle
+    /// window of 4 with a wide tolerance stops after two windows; without one all 20 steps run.
+    #[test]
+    fn tracking_stops_once_the_loss_has_levelled_off() {
         let (config, camera, poses) = walk(2);
         let mapping = MappingConfig {
-            first_iterations: 5,
+            first_iterations: 20,
             ..MappingConfig::default()
         };
-        for (window, expected) in [(5, 13), (0, 20)] {
+        for (window, expected) in [(4, 8), (0, 20)] {
             let tracking = TrackingConfig {
                 iterations: 20,
                 settle_window: window,
+                settle_tolerance: 0.5,
                 ..TrackingConfig::default()
             };
             let mut slam = room_slam(camera, &tracking, &mapping);
             let frame = |i: usize| room_frame(&config, &camera, &poses[i], i);
             slam.process(frame(0), poses[0], &mut Fixed(poses[0]))
                 .unwrap();
-            let mut model = Walking {
-                start: poses[1],
-                steps: 0,
-            };
             let report = slam
-                .process(frame(1), poses[0], &mut model)
+                .process(frame(1), poses[0], &mut Fixed(poses[1]))
                 .unwrap()
                 .unwrap();
             assert_eq!(report.iterations, expected, "window {window}");
