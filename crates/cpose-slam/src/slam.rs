@@ -38,12 +38,6 @@ pub struct TrackingConfig {
     /// A frame whose median depth error `|D̂ − D|` at the chosen pose exceeds this (metres) is
     /// reported lost: the map does not explain it (a track that drifts off slowly).
     pub lost_depth_error: f64,
-    /// Tracking stops before `iterations` once its loss has levelled off: the mean loss of the
-    /// last `settle_window` steps is less than `settle_tolerance` (a fraction) below the mean of
-    /// the window before. 0 runs every iteration (NICE-SLAM).
-    pub settle_window: usize,
-    /// See `settle_window`.
-    pub settle_tolerance: f64,
 }
 
 impl TrackingConfig {
@@ -54,7 +48,6 @@ impl TrackingConfig {
             ("rotation_lr_factor", self.rotation_lr_factor),
             ("lost_translation", self.lost_translation),
             ("lost_depth_error", self.lost_depth_error),
-            ("settle_tolerance", self.settle_tolerance),
         ];
         for (key, value) in positive {
             if !(value.is_finite() && value > 0.0) {
@@ -78,8 +71,6 @@ impl Default for TrackingConfig {
             rotation_lr_factor: 1.0,
             lost_translation: 0.5,
             lost_depth_error: 0.2,
-            settle_window: 0,
-            settle_tolerance: 0.01,
         }
     }
 }
@@ -133,9 +124,6 @@ pub struct TrackReport {
     /// A lost frame whose start was measured ([`PoseModel::start_is_measured`]): its estimate is
     /// the start instead of the lost track, and it is left out of the map.
     pub recovered: bool,
-    /// Tracking steps taken ([`TrackingConfig::settle_window`] may stop before
-    /// [`TrackingConfig::iterations`]).
-    pub iterations: usize,
 }
 
 /// The state of one SLAM run.
@@ -359,15 +347,7 @@ impl Slam {
         let mut rng = self.rng(index, 1);
         let mut best = (f64::INFINITY, start, 0.0);
         self.pose_grads.resize(1, PoseGradient::new());
-        let mut losses = Vec::with_capacity(self.tracking.iterations);
         for _ in 0..self.tracking.iterations {
-            if levelled_off(
-                &losses,
-                self.tracking.settle_window,
-                self.tracking.settle_tolerance,
-            ) {
-                break;
-            }
             let body = model.pose();
             let pose = body * mount;
             let edge = self.tracking.edge;
@@ -391,7 +371,6 @@ impl Slam {
             if !loss.is_finite() {
                 anyhow::bail!("tracking loss is {loss} at frame {index}");
             }
-            losses.push(loss);
             if loss < best.0 {
                 best = (loss, body, self.map.depth_error());
                 model.keep_best();
@@ -417,7 +396,6 @@ impl Slam {
             depth_error,
             lost,
             recovered,
-            iterations: losses.len(),
         })
     }
 
@@ -466,18 +444,6 @@ impl Slam {
             }
         }
     }
-}
-
-/// Whether the tracking `losses` so far have levelled off: the mean of the last `window` is less
-/// than `tolerance` below the mean of the `window` before ([`TrackingConfig::settle_window`];
-/// never when `window` is 0).
-fn levelled_off(losses: &[f64], window: usize, tolerance: f64) -> bool {
-    if window == 0 || losses.len() < 2 * window {
-        return false;
-    }
-    let mean = |l: &[f64]| l.iter().sum::<f64>() / l.len() as f64;
-    let (before, last) = losses[losses.len() - 2 * window..].split_at(window);
-    mean(last) > (1.0 - tolerance) * mean(before)
 }
 
 /// Samples up to `n` pixels with a depth reading, uniformly inside the `edge` border, as rays
@@ -685,48 +651,6 @@ mod tests {
                 (estimate.translation.vector - kept.translation.vector).norm() < 1e-12,
                 "{measured}: {estimate:?}"
             );
-        }
-    }
-
-    /// A loss that still falls by 2% a step has not levelled off; one that stopped falling has,
-    /// once two windows are in; a window of 0 never stops.
-    #[test]
-    fn the_loss_levels_off_after_two_flat_windows() {
-        let falling: Vec<f64> = (0..40).map(|k| 0.98f64.powi(k)).collect();
-        assert!((6..=40).all(|n| !levelled_off(&falling[..n], 3, 0.01)));
-        let mut flat = falling[..10].to_vec();
-        flat.extend([falling[9]; 10]);
-        let stop = (1..=20).find(|&n| levelled_off(&flat[..n], 3, 0.01));
-        // Windows 8..11 and 11..14: the first holds one more falling step, only 0.7% above.
-        assert_eq!(stop, Some(14));
-        assert!(!levelled_off(&flat, 0, 0.01));
-    }
-
-    /// Tracking from the true pose with a model that cannot move: the loss is flat, so a settle
-    /// window of 4 with a wide tolerance stops after two windows; without one all 20 steps run.
-    #[test]
-    fn tracking_stops_once_the_loss_has_levelled_off() {
-        let (config, camera, poses) = walk(2);
-        let mapping = MappingConfig {
-            first_iterations: 20,
-            ..MappingConfig::default()
-        };
-        for (window, expected) in [(4, 8), (0, 20)] {
-            let tracking = TrackingConfig {
-                iterations: 20,
-                settle_window: window,
-                settle_tolerance: 0.5,
-                ..TrackingConfig::default()
-            };
-            let mut slam = room_slam(camera, &tracking, &mapping);
-            let frame = |i: usize| room_frame(&config, &camera, &poses[i], i);
-            slam.process(frame(0), poses[0], &mut Fixed(poses[0]))
-                .unwrap();
-            let report = slam
-                .process(frame(1), poses[0], &mut Fixed(poses[1]))
-                .unwrap()
-                .unwrap();
-            assert_eq!(report.iterations, expected, "window {window}");
         }
     }
 

@@ -274,8 +274,6 @@ struct MethodResult {
     /// Lost frames whose estimate fell back to their measured start ([`TrackReport::recovered`]).
     recovered_frames: usize,
     first_lost: Option<usize>,
-    /// Tracking steps per tracked frame ([`crate::slam::TrackingConfig::settle_window`]).
-    tracking_iterations_mean: Option<f64>,
     /// Frames over the run's wall time (tracking, mapping, reading frames, checkpoints).
     fps: f64,
     /// Tracked frames per second of tracking time, and frames per second of mapping time.
@@ -834,7 +832,6 @@ pub fn run_methods(
                 lost_frames: lost.len(),
                 recovered_frames: tracking_log.recovered,
                 first_lost: lost.first().copied(),
-                tracking_iterations_mean: tracking_log.iterations_mean(),
                 fps: n as f64 / wall_s,
                 tracking_fps: slam.tracking_fps(),
                 mapping_fps: slam.mapping_fps(),
@@ -863,14 +860,12 @@ struct TrackingLog {
     start_steps: (f64, f64, usize),
     /// Frames recovered from a lost track ([`TrackReport::recovered`]).
     recovered: usize,
-    /// Tracking steps over the rows, and the rows.
-    iterations: (usize, usize),
 }
 
 impl TrackingLog {
     const HEADER: &str = "frame,time_s,start_error_cm,error_cm,start_rotation_error_deg,\
                           rotation_error_deg,moved_cm,depth_error_cm,loss,lost,recovered,\
-                          start_step_error_cm,start_step_rotation_error_deg,iterations";
+                          start_step_error_cm,start_step_rotation_error_deg";
 
     /// Creates `path`; a resumed run (`first > 0`) keeps the rows of the frames before `first`.
     fn open(path: &Path, first: usize) -> anyhow::Result<Self> {
@@ -893,21 +888,17 @@ impl TrackingLog {
             file: BufWriter::new(file),
             start_steps: (0.0, 0.0, 0),
             recovered: 0,
-            iterations: (0, 0),
         };
         log.write(format_args!("{}", Self::HEADER))?;
         for line in &kept {
             log.write(format_args!("{line}"))?;
             let fields: Vec<&str> = line.split(',').collect();
-            if let [.., recovered, cm, deg, iterations] = fields[..]
+            if let [.., recovered, cm, deg] = fields[..]
                 && fields.len() == Self::HEADER.split(',').count()
-                && let (Ok(cm), Ok(deg), Ok(iterations)) =
-                    (cm.parse(), deg.parse(), iterations.parse::<usize>())
+                && let (Ok(cm), Ok(deg)) = (cm.parse(), deg.parse())
             {
                 log.add_start_step(cm, deg);
                 log.recovered += usize::from(recovered == "1");
-                log.iterations.0 += iterations;
-                log.iterations.1 += 1;
             }
         }
         Ok(log)
@@ -925,12 +916,6 @@ impl TrackingLog {
     fn start_rpe(&self) -> Option<(f64, f64)> {
         let (cm, deg, count) = self.start_steps;
         (count > 0).then(|| ((cm / count as f64).sqrt(), (deg / count as f64).sqrt()))
-    }
-
-    /// The mean tracking steps per frame so far (`None` before the first tracked frame).
-    fn iterations_mean(&self) -> Option<f64> {
-        let (sum, rows) = self.iterations;
-        (rows > 0).then(|| sum as f64 / rows as f64)
     }
 
     /// The row of frame `index` at `time`: its report, the chosen estimate and the truth, and the
@@ -963,17 +948,14 @@ impl TrackingLog {
             self.add_start_step(cm, deg);
         }
         self.recovered += usize::from(report.recovered);
-        self.iterations.0 += report.iterations;
-        self.iterations.1 += 1;
         self.write(format_args!(
             "{index},{time:.6},{start_cm:.3},{cm:.3},{start_deg:.4},{deg:.4},{:.3},{:.3},{:.6},{},\
-             {},{step_cm},{step_deg},{}",
+             {},{step_cm},{step_deg}",
             100.0 * report.moved,
             100.0 * report.depth_error,
             report.loss,
             u8::from(report.lost),
-            u8::from(report.recovered),
-            report.iterations
+            u8::from(report.recovered)
         ))
     }
 
