@@ -300,15 +300,7 @@ impl NeuralMap {
             }
             self.cotangents.push(g);
         }
-        self.grad_params.fill(0.0);
-        self.renderer.backward(
-            &mut self.field,
-            &self.settings,
-            &self.rays,
-            &self.cotangents,
-            Some(&mut self.grad_params),
-            None,
-        );
+        self.backward(true, None);
         self.adam.begin_step();
         let params = self.field.params_mut();
         for (range, lr) in &self.groups {
@@ -380,15 +372,25 @@ impl NeuralMap {
             self.cotangents.push(g);
         }
         // The field is held fixed: only the points' gradient is taken.
+        self.backward(false, Some(pose_grads));
+        loss
+    }
+
+    /// The reverse pass of the last render with `self.cotangents`: the field's gradient into
+    /// `self.grad_params` (cleared first) when `params`, the poses' into `pose_grads` when given.
+    fn backward(&mut self, params: bool, pose_grads: Option<&mut [PoseGradient]>) {
+        let grad_params = params.then(|| {
+            self.grad_params.fill(0.0);
+            &mut self.grad_params[..]
+        });
         self.renderer.backward(
             &mut self.field,
             &self.settings,
             &self.rays,
             &self.cotangents,
-            None,
-            Some(pose_grads),
+            grad_params,
+            pose_grads,
         );
-        loss
     }
 
     /// The median depth error `|D̂ − D|` of the last [`NeuralMap::tracking_loss`], metres.

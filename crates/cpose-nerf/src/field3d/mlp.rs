@@ -244,6 +244,18 @@ struct Workspace<S: Real> {
     parts: Vec<Part<S>>,
 }
 
+impl<S: Real> Workspace<S> {
+    /// Writes the parts' `∂L/∂x` of the last reverse pass into `grad_points` (`n × 3`).
+    fn write_grad_points(&self, grad_points: &mut [S]) {
+        for part in &self.parts[..self.used] {
+            let out = &mut grad_points[3 * part.start..3 * (part.start + part.b)];
+            for (o, &g) in out.iter_mut().zip(&part.grad_points) {
+                *o = S::from_f64(g);
+            }
+        }
+    }
+}
+
 impl<S: Real> NerfMlpField<S> {
     /// The configuration it was built from.
     pub fn config(&self) -> &NerfMlpConfig {
@@ -318,15 +330,14 @@ impl<S: Real> NerfMlpField<S> {
         }
     }
 
-    /// Reverse pass of one part, chunk by chunk: `∂L/∂θ` into `g` (`accum` for the first
-    /// chunk, then added), `∂L/∂x` into `part.grad_points`.
+    /// Reverse pass of one part, chunk by chunk: `∂L/∂θ` into `g` when given (`accum` for the
+    /// first chunk, then added), `∂L/∂x` into `part.grad_points`.
     fn backward_part(
         &self,
         part: &mut Part<S>,
         grad_sigma: &[S],
         grad_rgb: &[S],
-        g: &mut [S],
-        accum: Accum,
+        mut g: Option<(&mut [S], Accum)>,
     ) {
         let (b, start) = (part.b, part.start);
         let (dim, width) = (self.embedding.output_dim(), self.config.width);
@@ -337,13 +348,18 @@ impl<S: Real> NerfMlpField<S> {
         grow(&mut part.grad_enc, c * dim);
         grow(&mut part.grad_x, 3 * c);
         grow(&mut part.grad_points, 3 * b);
-        let (g_trunk, g_head) = g.split_at_mut(self.trunk.num_params());
+        let nt = self.trunk.num_params();
         for (k, (r, (trunk, head))) in chunks(b)
             .zip(part.trunk.iter_mut().zip(&mut part.head))
             .enumerate()
         {
             let len = r.len();
-            let accum = if k == 0 { accum } else { Accum::Add };
+            // The first chunk writes or adds as asked; the others add.
+            let mut g = g.as_mut().map(|(g, accum)| {
+                let accum = if k == 0 { *accum } else { Accum::Add };
+                let (g_trunk, g_head) = g.split_at_mut(nt);
+                (g_trunk, g_head, accum)
+            });
             let gz = &mut part.grad_z[..3 * len];
             colour_backward(
                 &part.rgb[3 * r.start..3 * r.end],
@@ -354,8 +370,13 @@ impl<S: Real> NerfMlpField<S> {
             let h = &part.h[r.start * width..r.end * width];
             let gh = &mut part.grad_h[..len * width];
             gh.fill(S::ZERO);
-            self.head
-                .backward(h, head, gz, g_head, accum, Some(&mut *gh));
+            match g.as_mut() {
+                Some((_, g_head, accum)) => {
+                    self.head
+                        .backward(h, head, gz, g_head, *accum, Some(&mut *gh))
+                }
+                None => self.head.backward_input(h, head, gz, gh),
+            }
             // Trunk output: ∂L/∂z₀ = ∂L/∂σ · σ', ∂L/∂z_{1..} = ∂L/∂h · [h > 0].
             let (gz0, gzh) = part.grad_trunk[..len * (width + 1)].split_at_mut(len);
             let gs = &grad_sigma[start + r.start..start + r.end];
@@ -369,8 +390,13 @@ impl<S: Real> NerfMlpField<S> {
             let genc = &mut part.grad_enc[..len * dim];
             genc.fill(S::ZERO);
             let gt = &part.grad_trunk[..len * (width + 1)];
-            self.trunk
-                .backward(enc, trunk, gt, g_trunk, accum, Some(&mut *genc));
+            match g {
+                Some((g_trunk, _, accum)) => {
+                    self.trunk
+                        .backward(enc, trunk, gt, g_trunk, accum, Some(&mut *genc))
+                }
+                None => self.trunk.backward_input(enc, trunk, gt, genc),
+            }
             let gx = &mut part.grad_x[..3 * len];
             gx.fill(0.0);
             let x = &part.x[3 * r.start..3 * r.end];
@@ -455,14 +481,24 @@ impl<S: Real> RadianceField<S> for NerfMlpField<S> {
             &mut ws.parts[..used],
             grad,
             |part| &mut part.grad,
-            |part, g, accum| this.backward_part(part, grad_sigma, grad_rgb, g, accum),
+            |part, g, accum| this.backward_part(part, grad_sigma, grad_rgb, Some((g, accum))),
         );
-        for part in &ws.parts[..used] {
-            let out = &mut grad_points[3 * part.start..3 * (part.start + part.b)];
-            for (o, &g) in out.iter_mut().zip(&part.grad_points) {
-                *o = S::from_f64(g);
-            }
-        }
+        ws.write_grad_points(grad_points);
+        self.ws = ws;
+    }
+
+    fn backward_points(&mut self, grad_sigma: &[S], grad_rgb: &[S], grad_points: &mut [S]) {
+        let n = self.ws.n;
+        assert!(
+            grad_sigma.len() == n && grad_rgb.len() == 3 * n && grad_points.len() == 3 * n,
+            "backward_points: cotangents and point gradient must match the last forward"
+        );
+        let mut ws = std::mem::take(&mut self.ws);
+        let this = &*self;
+        run_parts(&mut ws.parts[..ws.used], |_, part| {
+            this.backward_part(part, grad_sigma, grad_rgb, None)
+        });
+        ws.write_grad_points(grad_points);
         self.ws = ws;
     }
 }
@@ -529,7 +565,7 @@ mod tests {
 
     use super::super::test_support::{
         assert_f32_matches_f64, check_batches_agree, check_gradients,
-        check_parallel_matches_single_part, points,
+        check_parallel_matches_single_part, check_points_gradient_alone, points,
     };
     use super::*;
 
@@ -744,6 +780,19 @@ mod tests {
         };
         let pts = points(4500, 12, scene(true).centre, 6.0, |_| false);
         check_parallel_matches_single_part(make, &pts);
+    }
+
+    /// With the parameters held fixed the points' gradient is the full pass's, bit for bit, in
+    /// one part and in two (4500 points), with coarse-to-fine partly on.
+    #[test]
+    fn points_gradient_alone_matches_the_full_pass() {
+        for n in [40, 4500] {
+            let mut field = small().init::<f64>(scene(true)).expect("valid");
+            randomise_biases(&mut field, 6);
+            field.set_progress(0.3);
+            let pts = points(n, 3, scene(true).centre, 6.0, |_| false);
+            check_points_gradient_alone(&mut field, &pts);
+        }
     }
 
     /// A batch of several MLP chunks gives the results of small batches.

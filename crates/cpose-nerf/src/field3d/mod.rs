@@ -595,6 +595,25 @@ mod test_support {
         }
     }
 
+    /// [`RadianceField::backward_points`] gives the point gradient of the full
+    /// [`RadianceField::backward`] bit for bit, at `points`, and it is not zero.
+    pub fn check_points_gradient_alone(field: &mut dyn RadianceField<f64>, points: &[f64]) {
+        let n = points.len() / 3;
+        let (gs, gc) = cotangents(n);
+        let (mut sigma, mut rgb) = (vec![0.0; n], vec![0.0; 3 * n]);
+        field.forward(points, &mut sigma, &mut rgb);
+        let mut grad = vec![0.0; field.num_params()];
+        let mut full = vec![0.0; 3 * n];
+        field.backward(&gs, &gc, &mut grad, &mut full);
+        let mut alone = vec![f64::NAN; 3 * n];
+        field.backward_points(&gs, &gc, &mut alone);
+        assert_eq!(alone, full, "{n} points");
+        assert!(
+            full.iter().any(|&g| g != 0.0),
+            "a zero gradient tests nothing"
+        );
+    }
+
     /// The `f32` field `b` agrees with the `f64` field `a` (same parameters and progress) on
     /// densities and colours (1e-5 relative to the density scale) and on parameter and point
     /// gradients (1e-4 of the largest), at `points`.
