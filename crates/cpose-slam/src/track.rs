@@ -517,8 +517,8 @@ impl PoseNetTracker {
     /// Keeps the current weights as the frame's best candidate's.
     fn keep_best_weights(&mut self) {
         self.best.clear();
-        self.best
-            .extend_from_slice(&cpose_core::pose_field::params_to_vec(self.net.as_ref()));
+        let best = &mut self.best;
+        self.net.params(&mut |_, p| best.extend_from_slice(p));
     }
 
     /// Goes back to the weights of the frame's best candidate, if one was kept.
