@@ -3,8 +3,6 @@
 //! from a mesh vertex to the nearest true surface point, completion the fraction of true surface
 //! points with a mesh vertex within [`COMPLETION_RADIUS`].
 
-use std::collections::HashMap;
-
 use nalgebra::{Isometry3, Point3};
 
 use crate::data::{RgbdError, RgbdSequence};
@@ -20,48 +18,81 @@ const PIXEL_STRIDE: usize = 4;
 /// Mesh quality against the true surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceScore {
-    /// Median distance from a mesh vertex to the true surface points, metres (capped at
-    /// [`COMPLETION_RADIUS`]: farther vertices count as that far).
+    /// Median distance from a mesh vertex to the nearest true surface point, metres.
     pub accuracy_m: f64,
     /// Fraction of true surface points within [`COMPLETION_RADIUS`] of a mesh vertex.
     pub completion: f64,
 }
 
-/// Points bucketed in cubes of side `radius`, for nearest-neighbour queries within `radius`.
-struct PointIndex {
-    radius: f64,
-    cells: HashMap<[i64; 3], Vec<Point3<f64>>>,
+/// A k-d tree over points, stored in place: in every range of the array the middle element
+/// splits the rest along the range's widest axis (smaller coordinates before it), recursively.
+struct KdTree {
+    points: Vec<Point3<f64>>,
+    /// The split axis of the element at each position (unused at leaves).
+    axes: Vec<u8>,
 }
 
-impl PointIndex {
-    fn new(radius: f64, points: impl IntoIterator<Item = Point3<f64>>) -> Self {
-        let mut cells: HashMap<[i64; 3], Vec<Point3<f64>>> = HashMap::new();
-        for p in points {
-            cells.entry(Self::cell(radius, &p)).or_default().push(p);
+impl KdTree {
+    fn new(points: impl IntoIterator<Item = Point3<f64>>) -> Self {
+        let mut points: Vec<_> = points.into_iter().collect();
+        let mut axes = vec![0; points.len()];
+        Self::build(&mut points, &mut axes);
+        Self { points, axes }
+    }
+
+    fn build(points: &mut [Point3<f64>], axes: &mut [u8]) {
+        if points.len() <= 1 {
+            return;
         }
-        Self { radius, cells }
+        let spread = |a: usize| {
+            let (lo, hi) = points
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    (lo.min(p[a]), hi.max(p[a]))
+                });
+            hi - lo
+        };
+        let axis = (0..3)
+            .max_by(|&a, &b| spread(a).total_cmp(&spread(b)))
+            .unwrap_or(0);
+        let mid = points.len() / 2;
+        points.select_nth_unstable_by(mid, |p, q| p[axis].total_cmp(&q[axis]));
+        axes[mid] = axis as u8;
+        let (left, right) = points.split_at_mut(mid);
+        let (axes_left, axes_right) = axes.split_at_mut(mid);
+        Self::build(left, axes_left);
+        Self::build(&mut right[1..], &mut axes_right[1..]);
     }
 
-    fn cell(radius: f64, p: &Point3<f64>) -> [i64; 3] {
-        [0, 1, 2].map(|a| (p[a] / radius).floor() as i64)
-    }
-
-    /// Distance to the nearest point if it is within `radius`.
-    fn nearest_within(&self, p: &Point3<f64>) -> Option<f64> {
-        let c = Self::cell(self.radius, p);
+    /// Distance from `q` to the nearest point (infinite for an empty tree).
+    fn nearest(&self, q: &Point3<f64>) -> f64 {
         let mut best = f64::INFINITY;
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    if let Some(points) = self.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
-                        for q in points {
-                            best = best.min((p - q).norm());
-                        }
-                    }
-                }
-            }
+        Self::search(&self.points, &self.axes, q, &mut best);
+        best
+    }
+
+    fn search(points: &[Point3<f64>], axes: &[u8], q: &Point3<f64>, best: &mut f64) {
+        if points.is_empty() {
+            return;
         }
-        (best <= self.radius).then_some(best)
+        let mid = points.len() / 2;
+        *best = best.min((points[mid] - q).norm());
+        let axis = axes[mid] as usize;
+        let d = q[axis] - points[mid][axis];
+        let (left, right) = (
+            (&points[..mid], &axes[..mid]),
+            (&points[mid + 1..], &axes[mid + 1..]),
+        );
+        let (near, far) = if d < 0.0 {
+            (left, right)
+        } else {
+            (right, left)
+        };
+        Self::search(near.0, near.1, q, best);
+        // The far side holds only points at least |d| away along the split axis.
+        if d.abs() < *best {
+            Self::search(far.0, far.1, q, best);
+        }
     }
 }
 
@@ -94,22 +125,19 @@ pub fn score_mesh(
     if surface.is_empty() || mesh.vertices.is_empty() {
         return Ok(None);
     }
-    let r = COMPLETION_RADIUS;
-    let vertices = mesh
+    let vertices: Vec<Point3<f64>> = mesh
         .vertices
         .iter()
-        .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64));
-    let truth_index = PointIndex::new(r, surface.iter().copied());
-    let mut distances: Vec<f64> = vertices
-        .clone()
-        .map(|v| truth_index.nearest_within(&v).unwrap_or(r))
+        .map(|v| Point3::new(v[0] as f64, v[1] as f64, v[2] as f64))
         .collect();
+    let truth_tree = KdTree::new(surface.iter().copied());
+    let mut distances: Vec<f64> = vertices.iter().map(|v| truth_tree.nearest(v)).collect();
     let mid = distances.len() / 2;
     let accuracy_m = *distances.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let mesh_index = PointIndex::new(r, vertices);
+    let mesh_tree = KdTree::new(vertices);
     let covered = surface
         .iter()
-        .filter(|p| mesh_index.nearest_within(p).is_some())
+        .filter(|p| mesh_tree.nearest(p) <= COMPLETION_RADIUS)
         .count();
     Ok(Some(SurfaceScore {
         accuracy_m,
@@ -119,19 +147,38 @@ pub fn score_mesh(
 
 #[cfg(test)]
 mod tests {
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
     use super::*;
 
+    /// The tree's nearest distance is the brute-force one, for queries inside the cloud, beyond
+    /// it and on its points, on clouds with repeated coordinates.
     #[test]
-    fn nearest_within_finds_neighbours_across_cells_and_nothing_beyond_the_radius() {
-        let index = PointIndex::new(
-            0.05,
-            [Point3::new(0.049, 0.0, 0.0), Point3::new(1.0, 1.0, 1.0)],
-        );
-        // Across a cell boundary.
-        let d = index.nearest_within(&Point3::new(0.051, 0.0, 0.0)).unwrap();
-        assert!((d - 0.002).abs() < 1e-12);
-        assert_eq!(index.nearest_within(&Point3::new(0.2, 0.0, 0.0)), None);
-        // Within a neighbouring cell but farther than the radius.
-        assert_eq!(index.nearest_within(&Point3::new(0.0, 0.0, -0.06)), None);
+    fn nearest_matches_brute_force() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for n in [1, 2, 7, 500] {
+            let mut point = || {
+                // Coarse coordinates, so many points share one along an axis.
+                Point3::new(
+                    rng.random_range(0..20) as f64 * 0.1,
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(0..3) as f64,
+                )
+            };
+            let cloud: Vec<_> = (0..n).map(|_| point()).collect();
+            let tree = KdTree::new(cloud.iter().copied());
+            let mut queries: Vec<_> = (0..200).map(|_| point() + point().coords * 0.3).collect();
+            queries.push(cloud[0]);
+            queries.push(Point3::new(40.0, -30.0, 9.0));
+            for q in &queries {
+                let brute = cloud
+                    .iter()
+                    .map(|p| (p - q).norm())
+                    .fold(f64::INFINITY, f64::min);
+                assert_eq!(tree.nearest(q), brute, "{n} points, query {q}");
+            }
+        }
+        assert_eq!(KdTree::new([]).nearest(&Point3::origin()), f64::INFINITY);
     }
 }
