@@ -1333,6 +1333,27 @@ fn slam_imu_runs_on_simulated_and_real_imu() {
         if name == "imu-euroc" {
             let log = std::fs::read_to_string(out_dir.join("log.txt")).unwrap();
             assert!(log.contains("clear of every surface"), "{log}");
+            // The same flight under another spelling of its path reuses the rendered hall.
+            let again = temp_dir("imu-euroc-again");
+            let euroc = format!(
+                "euroc.path={}",
+                workspace_root()
+                    .join("../shared/data/euroc/./V1_02_excerpt")
+                    .display()
+            );
+            let mut args = vec!["run", config, "--out", again.to_str().unwrap(), "--force"];
+            for s in small.iter().chain(&sets).chain([&data_path.as_str()]) {
+                args.extend(["--set", s]);
+            }
+            args.extend(["-q", "--set", &euroc, "--set", "slam.methods=[\"prev\"]"]);
+            let out = cpose_in(&workspace_root(), &args);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let log = std::fs::read_to_string(again.join("log.txt")).unwrap();
+            assert!(log.contains("synthetic data: reusing"), "{log}");
         }
     }
     // A EuRoC folder whose sensor.yaml is missing.

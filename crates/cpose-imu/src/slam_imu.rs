@@ -262,10 +262,18 @@ fn euroc_room(
         );
     }
     let cameras: Vec<Isometry3<f64>> = cameras.iter().map(|c| room_from_world * c).collect();
+    // The rendered cameras themselves name the flight (not its path, which may be spelt
+    // differently for the same flight).
+    let mut fingerprint = crc32fast::Hasher::new();
+    for c in &cameras {
+        for v in c.translation.vector.iter().chain(c.rotation.coords.iter()) {
+            fingerprint.update(&v.to_le_bytes());
+        }
+    }
     let recipe = serde_json::json!({
         "generator": GENERATOR_VERSION,
         "synthetic": room,
-        "euroc": config.path,
+        "cameras_crc32": format!("{:08x}", fingerprint.finalize()),
         "frames": cameras.len(),
         "room_from_world": [
             room_from_world.translation.vector.as_slice(),
