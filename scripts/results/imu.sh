@@ -6,11 +6,11 @@
 #
 #   scripts/results/imu.sh [TABLE...]
 #
-# TABLE is synthetic, gyro_weight, accel_tie, euroc_5hz, euroc or windows_gyro (default: all, in
-# that order).
+# TABLE is synthetic, gyro_weight, accel_tie, euroc_5hz, euroc, speed or windows_gyro (default:
+# all, in that order).
 # Runs go to runs/results/imu/NAME (common.sh: environment); a finished run is kept and an
 # interrupted one resumed. The tables are printed to stdout. One EuRoC run of all eleven methods
-# takes about 1.5 hours on two cores.
+# took about 1.5 hours on two cores at 80 tracking steps a frame.
 set -eu
 # shellcheck source=common.sh
 . "$(dirname "$0")/common.sh"
@@ -59,12 +59,15 @@ table_accel_tie() {
         "$metrics" $dirs
 }
 
-# The relative family at 5 Hz on the flight, seeds 0 (euroc-5hz) to 3.
+# The relative family at 5 Hz on the flight, seeds 0 (euroc-5hz) to 3, with the 10 Hz config's
+# tracking budget per second of flight (80 steps a frame).
 table_euroc_5hz() {
-    run euroc-5hz "$euroc" --set "$euroc_data" --set data.stride=2 --set "$relative"
+    hz5='data.stride=2'
+    steps='tracking.iterations=80'
+    run euroc-5hz "$euroc" --set "$euroc_data" --set "$hz5" --set "$steps" --set "$relative"
     dirs="$out/euroc-5hz"
     for seed in 1 2 3; do
-        run "euroc-5hz-s$seed" "$euroc" --set "$euroc_data" --set data.stride=2 \
+        run "euroc-5hz-s$seed" "$euroc" --set "$euroc_data" --set "$hz5" --set "$steps" \
             --set "$relative" --set "run.seed=$seed"
         dirs="$dirs $out/euroc-5hz-s$seed"
     done
@@ -73,9 +76,40 @@ table_euroc_5hz() {
         "$metrics" $dirs
 }
 
+# Every method at 10 Hz, seeds 0 (euroc) to 3; vision alone (baseline, prev) also with 80
+# tracking steps a frame instead of the config's 40 (euroc-80-steps).
 table_euroc() {
     run euroc "$euroc" --set "$euroc_data"
-    table "EuRoC V1_02 at 10 Hz (configs/euroc_v102_imu.toml)" "$metrics" "$out/euroc"
+    dirs="$out/euroc"
+    for seed in 1 2 3; do
+        run "euroc-s$seed" "$euroc" --set "$euroc_data" --set "run.seed=$seed"
+        dirs="$dirs $out/euroc-s$seed"
+    done
+    for seed in 0 1 2 3; do
+        run "euroc-80-steps-s$seed" "$euroc" --set "$euroc_data" --set "run.seed=$seed" \
+            --set tracking.iterations=80 --set 'slam.methods=["baseline","prev"]'
+        dirs="$dirs $out/euroc-80-steps-s$seed"
+    done
+    # shellcheck disable=SC2086
+    table "EuRoC V1_02 at 10 Hz (configs/euroc_v102_imu.toml)" "$metrics" $dirs
+}
+
+# Each method alone on two threads at 10 Hz, seed 0: run it on an otherwise idle machine.
+table_speed() {
+    if [ -n "${CPOSE_THREADS:-}" ]; then
+        echo "table speed skipped: it times two threads (unset CPOSE_THREADS)" >&2
+        return 0
+    fi
+    dirs=
+    for method in baseline prev prev_loose prev_tight prev_accel prev_combined none loose tight \
+        accel combined; do
+        run "speed/$method" "$euroc" --set "$euroc_data" --set run.threads=2 \
+            --set "slam.methods=[\"$method\"]"
+        dirs="$dirs $out/speed/$method"
+    done
+    # shellcheck disable=SC2086
+    table "Speed at 10 Hz, each method alone on two threads (configs/euroc_v102_imu.toml)" \
+        fps,tracking_fps,mapping_fps,ate_rmse_cm $dirs
 }
 
 table_windows_gyro() {
@@ -100,6 +134,6 @@ table_windows_gyro() {
         "$metrics" $dirs
 }
 
-tables=$(tables_from "synthetic gyro_weight accel_tie euroc_5hz euroc windows_gyro" "$@")
+tables=$(tables_from "synthetic gyro_weight accel_tie euroc_5hz euroc speed windows_gyro" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables
