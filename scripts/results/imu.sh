@@ -6,8 +6,8 @@
 #
 #   scripts/results/imu.sh [TABLE...]
 #
-# TABLE is synthetic, gyro_weight, accel_tie, euroc_5hz, euroc, speed or windows_gyro (default:
-# all, in that order).
+# TABLE is synthetic, gyro_weight, accel_tie, euroc_5hz, euroc, readings, speed or windows_gyro
+# (default: all, in that order).
 # Runs go to runs/results/imu/NAME (common.sh: environment); a finished run is kept and an
 # interrupted one resumed. The tables are printed to stdout. One EuRoC run of all eleven methods
 # took about 1.5 hours on two cores at 80 tracking steps a frame.
@@ -94,6 +94,23 @@ table_euroc() {
     table "EuRoC V1_02 at 10 Hz (configs/euroc_v102_imu.toml)" "$metrics" $dirs
 }
 
+# prev_tight at 10 Hz with the tight terms at 5 readings a step (the default) and at every
+# reading (imu.max_readings=64: all 20 of a frame interval), seeds 0 to 3.
+table_readings() {
+    dirs=
+    for readings in 5 64; do
+        for seed in 0 1 2 3; do
+            name="euroc-tight-readings$readings-s$seed"
+            run "$name" "$euroc" --set "$euroc_data" --set 'slam.methods=["prev_tight"]' \
+                --set "imu.max_readings=$readings" --set "run.seed=$seed"
+            dirs="$dirs $out/$name"
+        done
+    done
+    # shellcheck disable=SC2086
+    table "prev_tight at 10 Hz with 5 readings a step and with all 20 (imu.max_readings)" \
+        "$metrics" $dirs
+}
+
 # Each method alone on two threads at 10 Hz, seed 0: run it on an otherwise idle machine.
 table_speed() {
     if [ -n "${CPOSE_THREADS:-}" ]; then
@@ -134,6 +151,6 @@ table_windows_gyro() {
         "$metrics" $dirs
 }
 
-tables=$(tables_from "synthetic gyro_weight accel_tie euroc_5hz euroc speed windows_gyro" "$@")
+tables=$(tables_from "synthetic gyro_weight accel_tie euroc_5hz euroc readings speed windows_gyro" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables
