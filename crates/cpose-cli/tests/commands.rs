@@ -1354,6 +1354,31 @@ fn slam_imu_runs_on_simulated_and_real_imu() {
             );
             let log = std::fs::read_to_string(again.join("log.txt")).unwrap();
             assert!(log.contains("synthetic data: reusing"), "{log}");
+            // A shorter flight replaces the hall: no frame of the longer one is left behind.
+            let mut args = vec!["run", config, "--out", again.to_str().unwrap(), "--force"];
+            for s in small.iter().chain(&sets).chain([&data_path.as_str()]) {
+                args.extend(["--set", s]);
+            }
+            args.extend(["-q", "--set", "synthetic.frames=4"]);
+            args.extend(["--set", "slam.methods=[\"prev\"]"]);
+            let out = cpose_in(&workspace_root(), &args);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let log = std::fs::read_to_string(again.join("log.txt")).unwrap();
+            assert!(log.contains("generated 4 frames"), "{log}");
+            let staging = format!(
+                ".{}.generating",
+                data.file_name().unwrap().to_string_lossy()
+            );
+            let beside: Vec<_> = std::fs::read_dir(data.parent().unwrap())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .filter(|n| n.starts_with(&staging))
+                .collect();
+            assert!(beside.is_empty(), "staging left behind: {beside:?}");
         }
     }
     // A EuRoC folder whose sensor.yaml is missing.

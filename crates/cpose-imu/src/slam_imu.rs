@@ -280,9 +280,13 @@ fn euroc_room(
             room_from_world.rotation.coords.as_slice(),
         ],
     });
-    ensure_generated(&data.path, &recipe, cameras.len(), input, |on_frame| {
-        render_room(room, &cameras, &data.path, on_frame)
-    })?;
+    ensure_generated(
+        &data.path,
+        &recipe,
+        cameras.len(),
+        input,
+        |staging, on_frame| render_room(room, &cameras, staging, on_frame),
+    )?;
     input.run_dir.log(format_args!(
         "{}: {} frames at {} Hz from {start} s; placed in the room {:.2} m clear of every surface",
         config.path.display(),

@@ -364,30 +364,45 @@ pub(crate) fn ensure_synthetic(
         "generator": GENERATOR_VERSION,
         "synthetic": config,
     });
-    ensure_generated(path, &recipe, config.frames, input, |on_frame| {
-        generate_room(config, path, on_frame)
+    ensure_generated(path, &recipe, config.frames, input, |staging, on_frame| {
+        generate_room(config, staging, on_frame)
     })
 }
 
-/// Runs `generate` (which writes a dataset into `path`, reporting `(frame, frames)` as it goes,
-/// and returns the number of frames) unless `path` already holds what `recipe` describes:
-/// the recipe is recorded in `path/synthetic.json` once every frame is written (before, the file
-/// marks the folder as being generated). A non-empty folder without that file is refused: it may
-/// hold a real dataset, which generating would overwrite.
+/// Runs `generate` (which writes a dataset into the folder it is given, reporting `(frame,
+/// frames)` as it goes, and returns the number of frames) unless `path` already holds what
+/// `recipe` describes, recorded in `path/synthetic.json`. A non-empty folder without that file is
+/// refused: it may hold a real dataset, which generating would overwrite.
+///
+/// The dataset is written into a private folder beside `path` and moved into place once complete,
+/// replacing an earlier generation there: a run killed half-way leaves no partial dataset at
+/// `path` (its staging folder, `.NAME.generating-PID`, may be deleted), no frame of a longer
+/// earlier generation is left behind, and two runs generating at once do not write into each
+/// other's files (the second to finish keeps the first one's).
 pub fn ensure_generated(
     path: &Path,
     recipe: &serde_json::Value,
     frames: usize,
     input: &TaskInput,
-    generate: impl FnOnce(&mut dyn FnMut(usize, usize)) -> Result<usize, RgbdError>,
+    generate: impl FnOnce(&Path, &mut dyn FnMut(usize, usize)) -> Result<usize, RgbdError>,
 ) -> anyhow::Result<()> {
     let stamp = path.join("synthetic.json");
     let wanted = serde_json::to_string_pretty(recipe)?;
-    if std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted) {
+    let current = || std::fs::read_to_string(&stamp).is_ok_and(|s| s == wanted);
+    let reuse = || {
         input
             .run_dir
             .log(format_args!("synthetic data: reusing {}", path.display()));
-        return Ok(());
+        Ok(())
+    };
+    if current() {
+        return reuse();
+    }
+    if path.exists() && !path.is_dir() {
+        bail!(
+            "{}: expected a folder for the synthetic data, found a file",
+            path.display()
+        );
     }
     let foreign = !stamp.exists()
         && std::fs::read_dir(path).is_ok_and(|mut entries| entries.next().is_some());
@@ -399,27 +414,49 @@ pub fn ensure_generated(
             path.display()
         );
     }
-    // Claimed before the first frame: a generation killed half-way leaves a folder that is
-    // still the generator's (its stamp does not match, so it is generated again).
-    let pending = serde_json::to_string_pretty(&serde_json::json!({ "generating": recipe }))?;
-    if path.exists() && !path.is_dir() {
-        bail!(
-            "{}: expected a folder for the synthetic data, found a file",
-            path.display()
-        );
-    }
-    std::fs::create_dir_all(path).with_context(|| format!("creating {}", path.display()))?;
-    cpose_core::fs::write_atomic(&stamp, pending.as_bytes())
-        .with_context(|| format!("writing {}", stamp.display()))?;
+    let name = path
+        .file_name()
+        .map_or_else(|| "synthetic".into(), |n| n.to_string_lossy().into_owned());
+    let staging = path.with_file_name(format!(".{name}.generating-{}", std::process::id()));
     let started = Instant::now();
-    let progress = input.progress(frames as u64, "rendering");
-    let n = generate(&mut |i, n| {
-        progress.set_length(n as u64);
-        progress.set_position(i as u64);
-    })?;
-    progress.finish();
-    cpose_core::fs::write_atomic(&stamp, wanted.as_bytes())
-        .with_context(|| format!("writing {}", stamp.display()))?;
+    let generated = (|| {
+        if staging.exists() {
+            std::fs::remove_dir_all(&staging)?;
+        }
+        std::fs::create_dir_all(&staging)
+            .with_context(|| format!("creating {}", staging.display()))?;
+        let progress = input.progress(frames as u64, "rendering");
+        let n = generate(&staging, &mut |i, n| {
+            progress.set_length(n as u64);
+            progress.set_position(i as u64);
+        })?;
+        progress.finish();
+        let staged_stamp = staging.join("synthetic.json");
+        cpose_core::fs::write_atomic(&staged_stamp, wanted.as_bytes())
+            .with_context(|| format!("writing {}", staged_stamp.display()))?;
+        anyhow::Ok(n)
+    })();
+    let placed = generated.and_then(|n| {
+        // Another run may have put the same data in place meanwhile.
+        if current() {
+            return Ok(None);
+        }
+        if path.exists() {
+            // The generator's own folder (checked above): an earlier generation.
+            std::fs::remove_dir_all(path)
+                .with_context(|| format!("replacing {}", path.display()))?;
+        }
+        match std::fs::rename(&staging, path) {
+            Ok(()) => Ok(Some(n)),
+            Err(_) if current() => Ok(None),
+            Err(e) => Err(e).with_context(|| format!("moving the data to {}", path.display())),
+        }
+    });
+    // Left only where it was not moved into place.
+    let _ = std::fs::remove_dir_all(&staging);
+    let Some(n) = placed? else {
+        return reuse();
+    };
     input.run_dir.log(format_args!(
         "synthetic data: generated {n} frames in {} ({:.1} s)",
         path.display(),
