@@ -347,15 +347,21 @@ impl ImuPoseNet {
     }
 
     /// The gradient of the step's objective, the IMU loss plus `⟨G, q_i⟩ + ⟨g_t, p_i⟩`, into
-    /// `grad`.
+    /// `grad`. Without gyroscope terms (`none`, `accel`) only `t_i` is evaluated.
     fn gradient(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()> {
         self.grad.fill(0.0);
-        self.imu_loss(self.pixels)?;
+        let times = if self.gyro.is_empty() && self.delta.is_none() {
+            self.cot.reset(1, Order::Pose);
+            &self.times[self.times.len() - 1..]
+        } else {
+            self.imu_loss(self.pixels)?;
+            &self.times[..]
+        };
         // q_i = A_R ⊗ q_PN(t_i), p_i = R_0 p_PN(t_i) + a: ∂/∂q_PN = A_R* ⊗ G, ∂/∂p_PN = R_0ᵀ g_t.
-        let last = self.times.len() - 1;
+        let last = times.len() - 1;
         self.cot.rotation[last] += self.anchor_rotation.conjugate().into_inner() * grad_q;
         self.cot.translation[last] += self.reference.rotation.inverse() * grad_t;
-        self.net.backward(&self.times, &self.cot, &mut self.grad)?;
+        self.net.backward(times, &self.cot, &mut self.grad)?;
         Ok(())
     }
 
@@ -576,13 +582,16 @@ impl PoseModel for ImuPoseNet {
 
     fn step(&mut self, grad_q: &Quaternion<f64>, grad_t: &Vector3<f64>) -> anyhow::Result<()> {
         self.gradient(grad_q, grad_t)?;
-        if self.grad.iter().any(|g| !g.is_finite()) {
-            bail!("the PoseNet gradient is not finite while tracking");
-        }
         let lr = self.lr();
         self.adam
             .step_pose_field(self.net.as_mut(), &self.grad, &lr);
-        self.evaluate()
+        self.evaluate()?;
+        // A gradient that is not finite leaves the network's pose so.
+        let (t, q) = (&self.current.translation.vector, &self.current.rotation);
+        if !(t.iter().all(|x| x.is_finite()) && q.coords.iter().all(|x| x.is_finite())) {
+            bail!("the PoseNet pose is not finite after a tracking step");
+        }
+        Ok(())
     }
 
     fn finish(&mut self, _index: usize, time: f64, pose: &Isometry3<f64>) -> anyhow::Result<()> {
@@ -1323,6 +1332,7 @@ mod tests {
             ImuMode::None,
             ImuMode::Loose,
             ImuMode::Tight,
+            ImuMode::Accel,
             ImuMode::Combined,
         ] {
             step_gradient_check(mode);

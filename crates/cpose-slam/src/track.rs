@@ -434,8 +434,12 @@ impl PoseModel for PoseNetTracker {
         if let Some((_, steps)) = &self.objective {
             predict_steps = predict_steps.max(*steps);
         }
-        for _ in 0..predict_steps {
-            self.step_relative(&Quaternion::new(0.0, 0.0, 0.0, 0.0), &Vector3::zeros())?;
+        for step in 1..=predict_steps {
+            self.update(&Quaternion::new(0.0, 0.0, 0.0, 0.0), &Vector3::zeros())?;
+            // The relative term reads the network at t_i on every step, the frame's start once.
+            if self.relative_term.is_some() || step == predict_steps {
+                self.evaluate()?;
+            }
         }
         if let Some((objective, steps)) = &mut self.objective {
             objective.start_tracking();
@@ -545,6 +549,13 @@ impl PoseNetTracker {
     /// One Adam step from the cotangent `(∂L/∂q, ∂L/∂t)` of the network's own output at the
     /// current time; re-evaluates it.
     fn step_relative(&mut self, gq: &Quaternion<f64>, gt: &Vector3<f64>) -> anyhow::Result<()> {
+        self.update(gq, gt)?;
+        self.evaluate()
+    }
+
+    /// One Adam step from the cotangent `(∂L/∂q, ∂L/∂t)` of the network's output at the current
+    /// time (its last evaluation) plus the relative term's and the objective's.
+    fn update(&mut self, gq: &Quaternion<f64>, gt: &Vector3<f64>) -> anyhow::Result<()> {
         let (mut gq, mut gt) = (*gq, *gt);
         if let Some(term) = &self.relative_term {
             // On the network's output at t_i (the last evaluation).
@@ -552,12 +563,15 @@ impl PoseNetTracker {
             gq += dq;
             gt += dt;
         }
-        self.cotangent.reset(1, Order::Pose);
-        self.cotangent.rotation[0] = gq;
-        self.cotangent.translation[0] = gt;
         self.grad.fill(0.0);
-        self.net
-            .backward(&[self.time], &self.cotangent, &mut self.grad)?;
+        // A prediction step on the objective alone has nothing to back-propagate at t_i.
+        if gq != Quaternion::new(0.0, 0.0, 0.0, 0.0) || gt != Vector3::zeros() {
+            self.cotangent.reset(1, Order::Pose);
+            self.cotangent.rotation[0] = gq;
+            self.cotangent.translation[0] = gt;
+            self.net
+                .backward(&[self.time], &self.cotangent, &mut self.grad)?;
+        }
         if let Some((objective, _)) = &mut self.objective {
             objective.accumulate(self.net.as_mut(), &mut self.grad)?;
         }
@@ -570,7 +584,7 @@ impl PoseNetTracker {
                 ParamKind::Rotation => lr_r,
                 _ => lr_t,
             });
-        self.evaluate()
+        Ok(())
     }
 
     /// Keeps `(time, relative)` as the network's target there and re-fits it on its memory.
