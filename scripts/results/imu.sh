@@ -33,10 +33,17 @@ windows() {
         --set imu.gyro_weight=0.1 "$@"
 }
 
+# Seeds 0 (synthetic) to 3.
 table_synthetic() {
     run synthetic "$room"
-    table "Synthetic room at 5 Hz, simulated IMU (configs/synthetic_imu.toml)" "$metrics" \
-        "$out/synthetic"
+    dirs="$out/synthetic"
+    for seed in 1 2 3; do
+        run "synthetic-s$seed" "$room" --set "run.seed=$seed"
+        dirs="$dirs $out/synthetic-s$seed"
+    done
+    # shellcheck disable=SC2086
+    table "Synthetic room at 5 Hz, simulated IMU, seeds 0–3 (configs/synthetic_imu.toml)" \
+        "$metrics" $dirs
 }
 
 # The gyroscope's weight at the paper's 1 (the default 10 is table synthetic).
