@@ -96,9 +96,8 @@ pub struct ImuTrackConfig {
     /// At most this many readings per step of the tight terms, evenly spread over the interval.
     /// Each reading costs the network and its time derivative, forward and backward, on every
     /// step. The default, 5, samples a 10 Hz interval every 20 ms (5 Hz: 40 ms), far finer than
-    /// the network's finest period (0.6 s at 7 bands over EuRoC's 38 s), and cuts `prev_tight`'s
-    /// tracking to about a third of the cost of all 20 readings at 10 Hz with no loss in accuracy
-    /// measured over four seeds (`docs/results/imu.md`, table `readings`).
+    /// the network's finest period (0.6 s at 7 bands over EuRoC's 38 s); at 10 Hz it tracks as
+    /// well as all 20 readings over four seeds (`docs/results/imu.md`, table `readings`).
     pub max_readings: usize,
     /// Bound of this tracker's PoseNet translation, metres from the first body pose: its network
     /// is absolute. It replaces `posenet.network.translation_scale`, which stays the bound of the
