@@ -449,18 +449,33 @@ fn synth_room_resumes_after_kill_9_with_the_same_room() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    // The interrupted run writes into its own folder, killed once a few frames are there.
+    // The interrupted run writes into its own folder (through a staging folder beside it),
+    // killed once a few frames are there.
     let mut settings: Vec<&str> = small.to_vec();
     settings.push(&path_b);
+    let staging = format!(".{}.generating-", b.file_name().unwrap().to_string_lossy());
+    let beside = {
+        let (parent, staging) = (b.parent().unwrap().to_path_buf(), staging.clone());
+        move || -> Vec<PathBuf> {
+            std::fs::read_dir(&parent)
+                .unwrap()
+                .flatten()
+                .filter(|e| e.file_name().to_string_lossy().starts_with(&staging))
+                .map(|e| e.path())
+                .collect()
+        }
+    };
     let frames = |dir: &Path| std::fs::read_dir(dir.join("results")).map_or(0, |e| e.count());
-    let target = b.to_path_buf();
+    let staged = beside.clone();
     let cut = interrupt(
         "configs/synth_room.toml",
         &settings,
-        move |_| frames(&target) >= 4,
+        move |_| staged().iter().any(|d| frames(d) >= 4),
         0,
         false,
     );
+    // The resumed run generated the room again and removed the killed one's staging folder.
+    assert_eq!(beside(), Vec::<PathBuf>::new());
     assert_eq!(metrics(&cut)["room"]["synthetic"]["frames"], 60);
     for name in [
         "traj.txt",

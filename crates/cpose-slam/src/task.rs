@@ -374,11 +374,11 @@ pub(crate) fn ensure_synthetic(
 /// `recipe` describes, recorded in `path/synthetic.json`. A non-empty folder without that file is
 /// refused: it may hold a real dataset, which generating would overwrite.
 ///
-/// The dataset is written into a private folder beside `path` and moved into place once complete,
-/// replacing an earlier generation there: a run killed half-way leaves no partial dataset at
-/// `path` (its staging folder, `.NAME.generating-PID`, may be deleted), no frame of a longer
-/// earlier generation is left behind, and two runs generating at once do not write into each
-/// other's files (the second to finish keeps the first one's).
+/// The dataset is written into a private folder beside `path`, `.NAME.generating-PID`, and moved
+/// into place once complete, replacing an earlier generation there: a run killed half-way leaves
+/// no partial dataset at `path` (the next generation removes its folder once its process is gone;
+/// Linux), no frame of a longer earlier generation is left behind, and two runs generating at once
+/// do not write into each other's files (the second to finish keeps the first one's).
 pub fn ensure_generated(
     path: &Path,
     recipe: &serde_json::Value,
@@ -417,7 +417,9 @@ pub fn ensure_generated(
     let name = path
         .file_name()
         .map_or_else(|| "synthetic".into(), |n| n.to_string_lossy().into_owned());
-    let staging = path.with_file_name(format!(".{name}.generating-{}", std::process::id()));
+    let prefix = format!(".{name}.generating-");
+    remove_abandoned(path, &prefix);
+    let staging = path.with_file_name(format!("{prefix}{}", std::process::id()));
     let started = Instant::now();
     let generated = (|| {
         if staging.exists() {
@@ -463,6 +465,28 @@ pub fn ensure_generated(
         started.elapsed().as_secs_f64()
     ));
     Ok(())
+}
+
+/// Removes the staging folders `PREFIX<pid>` beside `path` whose process has ended (generations
+/// killed half-way). Only where running processes are listed in `/proc`.
+fn remove_abandoned(path: &Path, prefix: &str) {
+    let proc = Path::new("/proc/self");
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+    let (true, Ok(entries)) = (
+        proc.exists(),
+        std::fs::read_dir(parent.unwrap_or(Path::new("."))),
+    ) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let pid = name
+            .strip_prefix(prefix)
+            .and_then(|p| p.parse::<u32>().ok());
+        if pid.is_some_and(|pid| !Path::new("/proc").join(pid.to_string()).exists()) {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// The whole config, decoded and checked before any frame is read or generated.
