@@ -1341,33 +1341,25 @@ fn slam_imu_runs_on_simulated_and_real_imu() {
                     .join("../shared/data/euroc/./V1_02_excerpt")
                     .display()
             );
-            let mut args = vec!["run", config, "--out", again.to_str().unwrap(), "--force"];
-            for s in small.iter().chain(&sets).chain([&data_path.as_str()]) {
-                args.extend(["--set", s]);
-            }
-            args.extend(["-q", "--set", &euroc, "--set", "slam.methods=[\"prev\"]"]);
-            let out = cpose_in(&workspace_root(), &args);
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            let log = std::fs::read_to_string(again.join("log.txt")).unwrap();
+            // `prev` alone into `again`, with `extra` settings; its log.
+            let run_again = |extra: &str| {
+                let mut args = vec!["run", config, "--out", again.to_str().unwrap(), "--force"];
+                for s in small.iter().chain(&sets).chain([&data_path.as_str()]) {
+                    args.extend(["--set", s]);
+                }
+                args.extend(["-q", "--set", extra, "--set", "slam.methods=[\"prev\"]"]);
+                let out = cpose_in(&workspace_root(), &args);
+                assert!(
+                    out.status.success(),
+                    "{}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+                std::fs::read_to_string(again.join("log.txt")).unwrap()
+            };
+            let log = run_again(&euroc);
             assert!(log.contains("synthetic data: reusing"), "{log}");
             // A shorter flight replaces the hall: no frame of the longer one is left behind.
-            let mut args = vec!["run", config, "--out", again.to_str().unwrap(), "--force"];
-            for s in small.iter().chain(&sets).chain([&data_path.as_str()]) {
-                args.extend(["--set", s]);
-            }
-            args.extend(["-q", "--set", "synthetic.frames=4"]);
-            args.extend(["--set", "slam.methods=[\"prev\"]"]);
-            let out = cpose_in(&workspace_root(), &args);
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            let log = std::fs::read_to_string(again.join("log.txt")).unwrap();
+            let log = run_again("synthetic.frames=4");
             assert!(log.contains("generated 4 frames"), "{log}");
             let staging = format!(
                 ".{}.generating",
