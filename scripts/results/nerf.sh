@@ -6,7 +6,7 @@
 #   scripts/results/nerf.sh [TABLE...]
 #
 # TABLE is one of hold_fern hold_synthetic lego lego_barf grid restarts restarts_grid llff
-# llff_colmap encoding (default: all, in that order). Runs go to runs/results/nerf/GROUP/NAME
+# llff_colmap encoding fields (default: all, in that order). Runs go to runs/results/nerf/GROUP/NAME
 # (common.sh: environment); a finished run is kept and an interrupted one resumed, so the script
 # continues where it stopped. The tables are printed to stdout. The grid is 13 runs of about 15
 # minutes each on two cores; everything, about 40 runs, takes a day, so a page is usually made a
@@ -206,6 +206,18 @@ table_encoding() {
         "$out/$d/f10-c2f"
 }
 
-tables=$(tables_from "hold_fern hold_synthetic lego lego_barf grid restarts restarts_grid llff llff_colmap encoding" "$@")
+# The two radiance fields with the true poses, 1500 steps each: the hash grid (the default) and
+# BARF's NeRF MLP at half its depth and width (4 layers of 128, the input again at the third).
+table_fields() {
+    true_poses='train.methods=["true_poses"]'
+    run fields/grid "$synthetic" --set "$true_poses" --set train.iterations=1500
+    run fields/mlp "$synthetic" --set "$true_poses" --set train.iterations=1500 \
+        --set 'field.kind="mlp"' --set field.depth=4 --set field.width=128 \
+        --set field.skip_layer=2
+    table "The radiance fields with the true poses, 1500 steps (configs/nerf_synthetic.toml)" \
+        final_loss,psnr_db,ssim,wall_s "$out/fields/grid" "$out/fields/mlp"
+}
+
+tables=$(tables_from "hold_fern hold_synthetic lego lego_barf grid restarts restarts_grid llff llff_colmap encoding fields" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables
