@@ -12,7 +12,8 @@
 //!   truth, camera `cam0` on its real mount, placed in the room by [`fit_in_room`] — fused with
 //!   that flight's **real** IMU readings (real noise, real bias; `bias = "estimate"` removes the
 //!   bias estimated over the flight's stationary start, `"ground_truth"` the ground-truth state's
-//!   estimate instead, `"raw"` keeps it); or
+//!   estimate instead, `"raw"` keeps it; `imu.bias_refine` refines the gyroscope's online,
+//!   scored against the ground truth's in `metrics.json`); or
 //! * any RGB-D sequence of task `slam` (`[data]`) with an IMU simulated from its ground truth as
 //!   the paper's ScanNet protocol ([`crate::sim::imu_from_poses`]; `[imu_sim]`), the camera being
 //!   the body; `data.stride` then makes the camera slower than the IMU (30 Hz → 5 Hz with 6).
@@ -34,7 +35,7 @@ use cpose_slam::track::{FreePose, PoseModel, PoseNetTrackConfig, PoseNetTracker,
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::bias::{BiasRemoval, body_readings};
+use crate::bias::{BiasRemoval, body_readings, gyro_bias_left};
 use crate::euroc::EurocSequence;
 use crate::sim::{NoiseModel, imu_from_poses};
 use crate::tracker::{ImuPoseNet, ImuTrackConfig, RelativeImu};
@@ -190,12 +191,16 @@ impl TryFrom<String> for Method {
     }
 }
 
-/// Frames, IMU readings on the frames' clock, the camera's mount and gravity in the world.
+/// Frames, IMU readings on the frames' clock, the camera's mount and gravity in the world; the
+/// gyroscope's bias random walk (rad/s²/√Hz) and the bias its readings hold at the last frame,
+/// where known (rad/s, body frame).
 struct ImuRgbd {
     seq: RgbdSequence,
     imu: Vec<ImuSample>,
     body_from_camera: Isometry3<f64>,
     gravity: Vector3<f64>,
+    gyro_random_walk: f64,
+    gyro_bias_left: Option<Vector3<f64>>,
 }
 
 /// Bumped whenever the rendering of a flight through the room changes.
@@ -314,11 +319,14 @@ fn euroc_room(
         config.max_gap_secs,
     )
     .with_context(|| format!("{}", config.path.join("mav0/imu0/data.csv").display()))?;
+    let last = frame_times[frame_times.len() - 1];
     Ok(ImuRgbd {
         seq: rgbd,
         imu,
         body_from_camera,
         gravity: room_from_world.rotation * gravity_world(),
+        gyro_random_walk: seq.imu_noise.gyro_random_walk,
+        gyro_bias_left: Some(gyro_bias_left(&seq, config.bias, last)),
     })
 }
 
@@ -378,7 +386,7 @@ fn simulated(exp: &Experiment, input: &TaskInput) -> anyhow::Result<ImuRgbd> {
         .collect::<anyhow::Result<_>>()?;
     let gravity = gravity_world();
     let noise = exp.imu_sim.noise.then_some(&ADIS16448);
-    let imu = imu_from_poses(
+    let simulated = imu_from_poses(
         &times,
         &poses,
         exp.imu_sim.rate_hz,
@@ -394,8 +402,15 @@ fn simulated(exp: &Experiment, input: &TaskInput) -> anyhow::Result<ImuRgbd> {
             exp.imu_sim.rate_hz,
             times.len()
         )
-    })?
-    .samples;
+    })?;
+    // The bias of the reading nearest the last frame (the readings keep it: nothing removes it).
+    let last = times[times.len() - 1];
+    let k = simulated
+        .samples
+        .partition_point(|s| s.t_secs < last)
+        .min(simulated.samples.len() - 1);
+    let gyro_bias_left = simulated.gyro_bias.get(k).copied();
+    let imu = simulated.samples;
     input.run_dir.log(format_args!(
         "IMU simulated from the ground truth: {} readings at {} Hz{}",
         imu.len(),
@@ -411,6 +426,8 @@ fn simulated(exp: &Experiment, input: &TaskInput) -> anyhow::Result<ImuRgbd> {
         imu,
         body_from_camera: Isometry3::identity(),
         gravity,
+        gyro_random_walk: noise.map_or(0.0, |n| n.gyro_random_walk),
+        gyro_bias_left,
     })
 }
 
@@ -475,6 +492,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
     ));
     let (posenet, imu_config, seed) = (&exp.posenet, &exp.imu, input.run.seed);
     let (imu, gravity, pixels) = (&data.imu, data.gravity, setup.tracking.pixels);
+    let (random_walk, bias_left) = (data.gyro_random_walk, data.gyro_bias_left);
     let (lr, factor) = (setup.tracking.lr, setup.tracking.rotation_lr_factor);
     let frame_times = &seq.times();
     let methods: Vec<(String, ModelFactory)> = exp
@@ -505,7 +523,7 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         _ => ImuMode::Loose,
                     };
                     Box::new(move || {
-                        Ok(Box::new(RelativeImu::new(
+                        let model = RelativeImu::new(
                             posenet,
                             imu_config,
                             mode,
@@ -515,7 +533,12 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                             pixels,
                             range,
                             seed,
-                        )?) as _)
+                            random_walk,
+                        )?;
+                        Ok(Box::new(match bias_left {
+                            Some(truth) => model.with_bias_truth(truth),
+                            None => model,
+                        }) as _)
                     })
                 }
                 Method::Imu(mode) => Box::new(move || {

@@ -101,10 +101,22 @@ pub fn rate_l1(
 /// readings (right-multiplied: body-frame rates). `imu` must be sorted by time and cover
 /// `[t0, t1]`; `None` otherwise.
 pub fn integrate_gyro(imu: &[ImuSample], t0: f64, t1: f64) -> Option<UnitQuaternion<f64>> {
+    integrate_gyro_minus(imu, t0, t1, &Vector3::zeros())
+}
+
+/// [`integrate_gyro`] of the readings minus a constant `bias` (rad/s); bit for bit the same for
+/// a zero bias.
+pub fn integrate_gyro_minus(
+    imu: &[ImuSample],
+    t0: f64,
+    t1: f64,
+    bias: &Vector3<f64>,
+) -> Option<UnitQuaternion<f64>> {
+    let twice = bias * 2.0;
     Some(clipped_intervals(imu, t0, t1)?.fold(
         UnitQuaternion::identity(),
         |dq, (a, b, from, to)| {
-            dq * UnitQuaternion::from_scaled_axis((a.gyro + b.gyro) * (0.5 * (to - from)))
+            dq * UnitQuaternion::from_scaled_axis((a.gyro + b.gyro - twice) * (0.5 * (to - from)))
         },
     ))
 }
