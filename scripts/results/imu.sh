@@ -6,8 +6,8 @@
 #
 #   scripts/results/imu.sh [TABLE...]
 #
-# TABLE is synthetic, gyro_weight, accel_tie, euroc_5hz, euroc, readings, bias_refine, speed or
-# windows_gyro (default: all, in that order). Runs go to runs/results/imu/NAME (common.sh:
+# TABLE is synthetic, synthetic_10hz, gyro_weight, accel_tie, euroc_5hz, euroc, readings,
+# bias_refine, speed or windows_gyro (default: all, in that order). Runs go to runs/results/imu/NAME (common.sh:
 # environment); a finished run is kept and an interrupted one resumed. The tables are printed to
 # stdout. One EuRoC run of all eleven methods at 10 Hz takes about 40 minutes on one thread.
 set -eu
@@ -42,6 +42,20 @@ table_synthetic() {
     done
     # shellcheck disable=SC2086
     table "Synthetic room at 5 Hz, simulated IMU, seeds 0–3 (configs/synthetic_imu.toml)" \
+        "$metrics" $dirs
+}
+
+# The room at 10 Hz (every third frame), seeds 0 to 3, with the 5 Hz config's budgets per second:
+# 10 tracking steps a frame, the map every second frame, a keyframe every second.
+table_synthetic_10hz() {
+    dirs=
+    for seed in 0 1 2 3; do
+        run "synthetic-10hz-s$seed" "$room" --set data.stride=3 --set tracking.iterations=10 \
+            --set mapping.every=2 --set mapping.keyframe_every=10 --set "run.seed=$seed"
+        dirs="$dirs $out/synthetic-10hz-s$seed"
+    done
+    # shellcheck disable=SC2086
+    table "Synthetic room at 10 Hz, simulated IMU, seeds 0–3 (configs/synthetic_imu.toml)" \
         "$metrics" $dirs
 }
 
@@ -173,6 +187,6 @@ table_windows_gyro() {
         "$metrics" $dirs
 }
 
-tables=$(tables_from "synthetic gyro_weight accel_tie euroc_5hz euroc readings bias_refine speed windows_gyro" "$@")
+tables=$(tables_from "synthetic synthetic_10hz gyro_weight accel_tie euroc_5hz euroc readings bias_refine speed windows_gyro" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables
