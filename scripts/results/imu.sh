@@ -7,9 +7,10 @@
 #   scripts/results/imu.sh [TABLE...]
 #
 # TABLE is synthetic, synthetic_10hz, gyro_weight, accel_tie, euroc_5hz, euroc, readings,
-# bias_refine, speed or windows_gyro (default: all, in that order). Runs go to runs/results/imu/NAME (common.sh:
-# environment); a finished run is kept and an interrupted one resumed. The tables are printed to
-# stdout. One EuRoC run of all eleven methods at 10 Hz takes about 40 minutes on one thread.
+# bias_refine, speed or windows_gyro (default: all, in that order). Runs go to
+# runs/results/imu/NAME (common.sh: environment); a finished run is kept and an interrupted one
+# resumed. The tables are printed to stdout. One EuRoC run of all eleven methods at 10 Hz takes
+# about 40 minutes on one thread.
 set -eu
 # shellcheck source=common.sh
 . "$(dirname "$0")/common.sh"
