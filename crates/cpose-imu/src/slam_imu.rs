@@ -523,22 +523,21 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         _ => ImuMode::Loose,
                     };
                     Box::new(move || {
-                        let model = RelativeImu::new(
-                            posenet,
-                            imu_config,
-                            mode,
-                            imu.clone(),
-                            gravity,
-                            frame_times.clone(),
-                            pixels,
-                            range,
-                            seed,
-                            random_walk,
-                        )?;
-                        Ok(Box::new(match bias_left {
-                            Some(truth) => model.with_bias_truth(truth),
-                            None => model,
-                        }) as _)
+                        Ok(Box::new(
+                            RelativeImu::new(
+                                posenet,
+                                imu_config,
+                                mode,
+                                imu.clone(),
+                                gravity,
+                                frame_times.clone(),
+                                pixels,
+                                range,
+                                seed,
+                                random_walk,
+                            )?
+                            .with_bias_truth(bias_left),
+                        ) as _)
                     })
                 }
                 Method::Imu(mode) => Box::new(move || {

@@ -753,10 +753,11 @@ impl RelativeImu {
         })
     }
 
-    /// Scores the refined bias against `truth`, the bias the readings hold (rad/s, body frame):
-    /// metrics `gyro_bias_err_rad_s` (refined) and `gyro_bias_start_err_rad_s` (unrefined).
-    pub fn with_bias_truth(mut self, truth: Vector3<f64>) -> Self {
-        self.bias_truth = Some(truth);
+    /// Scores the refined bias against `truth`, the bias the readings hold (rad/s, body frame;
+    /// `None`: unknown): metrics `gyro_bias_err_rad_s` (refined) and `gyro_bias_start_err_rad_s`
+    /// (unrefined).
+    pub fn with_bias_truth(mut self, truth: Option<Vector3<f64>>) -> Self {
+        self.bias_truth = truth;
         self
     }
 
@@ -1486,7 +1487,7 @@ mod tests {
                 2e-5,
             )
             .unwrap()
-            .with_bias_truth(bias)
+            .with_bias_truth(Some(bias))
         };
         // Mean rotation error of the starts of the second half.
         let run = |model: &mut RelativeImu, frames: std::ops::Range<usize>| {
