@@ -7,7 +7,7 @@
 #   scripts/results/imu.sh [TABLE...]
 #
 # TABLE is synthetic, synthetic_10hz, gyro_weight, accel_tie, euroc_5hz, euroc, readings,
-# bias_refine, speed or windows_gyro (default: all, in that order). Runs go to
+# bias_refine, bias_truth, speed or windows_gyro (default: all, in that order). Runs go to
 # runs/results/imu/NAME (common.sh: environment); a finished run is kept and an interrupted one
 # resumed. The tables are printed to stdout. One EuRoC run of all eleven methods at 10 Hz takes
 # about 40 minutes on one thread.
@@ -148,6 +148,23 @@ table_bias_refine() {
         "$metrics,gyro_bias_err_rad_s,gyro_bias_start_err_rad_s" $dirs
 }
 
+# The control of bias_refine: the relative family at 10 Hz with the ground-truth state's bias
+# removed (euroc.bias = "ground_truth", not refined), seeds 0 to 3.
+table_bias_truth() {
+    dirs=
+    for seed in 0 1 2 3; do
+        name="euroc-bias-truth-s$seed"
+        run "$name" "$euroc" --set "$euroc_data" --set 'euroc.bias="ground_truth"' \
+            --set imu.bias_refine=false \
+            --set 'slam.methods=["prev_loose","prev_tight","prev_accel","prev_combined"]' \
+            --set "run.seed=$seed"
+        dirs="$dirs $out/$name"
+    done
+    # shellcheck disable=SC2086
+    table "The ground truth's bias at 10 Hz (euroc.bias = \"ground_truth\"): the control" \
+        "$metrics" $dirs
+}
+
 # Each method alone on two threads at 10 Hz, seed 0: run it on an otherwise idle machine.
 table_speed() {
     if [ -n "${CPOSE_THREADS:-}" ]; then
@@ -188,6 +205,6 @@ table_windows_gyro() {
         "$metrics" $dirs
 }
 
-tables=$(tables_from "synthetic synthetic_10hz gyro_weight accel_tie euroc_5hz euroc readings bias_refine speed windows_gyro" "$@")
+tables=$(tables_from "synthetic synthetic_10hz gyro_weight accel_tie euroc_5hz euroc readings bias_refine bias_truth speed windows_gyro" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables
