@@ -7,7 +7,7 @@
 #   scripts/results/imu.sh [TABLE...]
 #
 # TABLE is synthetic, synthetic_10hz, gyro_weight, accel_tie, euroc_5hz, euroc, readings,
-# bias_refine, bias_truth, speed or windows_gyro (default: all, in that order). Runs go to
+# bias_refine, bias_truth or speed (default: all, in that order). Runs go to
 # runs/results/imu/NAME (common.sh: environment); a finished run is kept and an interrupted one
 # resumed. The tables are printed to stdout. One EuRoC run of all eleven methods at 10 Hz takes
 # about 40 minutes on one thread.
@@ -17,21 +17,9 @@ set -eu
 out=${CPOSE_RESULTS:-runs/results}/imu
 room=configs/synthetic_imu.toml
 euroc=configs/euroc_v102_imu.toml
-euroc_windows=configs/euroc_v102_imu_windows.toml
 euroc_data="euroc.path=\"$data/euroc/V1_02_excerpt\""
-absolute='slam.methods=["none","loose","tight","accel","combined"]'
 relative='slam.methods=["baseline","prev","prev_loose","prev_tight","prev_accel","prev_combined"]'
 metrics=ate_rmse_cm,start_rpe_trans_rmse_cm,start_rpe_rot_rmse_deg,rpe_rot_rmse_deg,lost_frames,first_lost,recovered_frames
-
-# windows NAME CONFIG [ARGS...]: NAME with the absolute PoseNet in windows of 2 s (3 bands) and
-# the gyroscope's weight at a tenth; ARGS add the rotation rate (a fifth of the config's).
-windows() {
-    windows_name=$1
-    windows_config=$2
-    shift 2
-    run "$windows_name" "$windows_config" --set imu.window_secs=2 --set imu.window_bands=3 \
-        --set imu.gyro_weight=0.1 "$@"
-}
 
 # Seeds 0 (synthetic) to 3.
 table_synthetic() {
@@ -183,28 +171,6 @@ table_speed() {
         fps,tracking_fps,mapping_fps,ate_rmse_cm $dirs
 }
 
-table_windows_gyro() {
-    dirs=
-    for seed in 0 1 2 3; do
-        run "euroc-windows-gyro-s$seed" "$euroc_windows" --set "$euroc_data" \
-            --set "run.seed=$seed"
-        dirs="$dirs $out/euroc-windows-gyro-s$seed"
-    done
-    for seed in 1 2 3; do
-        run "euroc-baseline-s$seed" "$euroc" --set "$euroc_data" \
-            --set 'slam.methods=["baseline"]' --set "run.seed=$seed"
-        dirs="$dirs $out/euroc-baseline-s$seed"
-    done
-    for seed in 0 1; do
-        windows "room-windows-gyro-s$seed" "$room" --set "$absolute" \
-            --set imu.lr_rotation=1e-4 --set "run.seed=$seed"
-        dirs="$dirs $out/room-windows-gyro-s$seed"
-    done
-    # shellcheck disable=SC2086
-    table "Windows of 2 s, gyroscope weight 0.1 (configs/euroc_v102_imu_windows.toml; the room)" \
-        "$metrics" $dirs
-}
-
-tables=$(tables_from "synthetic synthetic_10hz gyro_weight accel_tie euroc_5hz euroc readings bias_refine bias_truth speed windows_gyro" "$@")
+tables=$(tables_from "synthetic synthetic_10hz gyro_weight accel_tie euroc_5hz euroc readings bias_refine bias_truth speed" "$@")
 # shellcheck disable=SC2086 # one word per table
 run_tables $tables
