@@ -12,7 +12,7 @@
 //!   truth, camera `cam0` on its real mount, placed in the room by [`fit_in_room`] — fused with
 //!   that flight's **real** IMU readings (real noise, real bias; `bias = "estimate"` removes the
 //!   bias estimated over the flight's stationary start, `"ground_truth"` the ground-truth state's
-//!   estimate instead, `"raw"` keeps it; `imu.bias_refine` (on) refines the gyroscope's online,
+//!   estimate instead, `"raw"` keeps it; `imu.bias_refine` refines the gyroscope's online,
 //!   scored against the ground truth's in `metrics.json`); or
 //! * any RGB-D sequence of task `slam` (`[data]`) with an IMU simulated from its ground truth as
 //!   the paper's ScanNet protocol ([`crate::sim::imu_from_poses`]; `[imu_sim]`), the camera being
