@@ -19,7 +19,20 @@ room=configs/synthetic_imu.toml
 euroc=configs/euroc_v102_imu.toml
 euroc_data="euroc.path=\"$data/euroc/V1_02_excerpt\""
 relative='slam.methods=["baseline","prev","prev_loose","prev_tight","prev_accel","prev_combined"]'
+relative_imu='slam.methods=["prev_loose","prev_tight","prev_accel","prev_combined"]'
 metrics=ate_rmse_cm,start_rpe_trans_rmse_cm,start_rpe_rot_rmse_deg,rpe_rot_rmse_deg,lost_frames,first_lost,recovered_frames
+
+# seeds NAME CONFIG [ARGS...]: runs NAME-s0 to NAME-s3, CONFIG with ARGS and run.seed=S, and adds
+# their folders to $dirs.
+seeds() {
+    seeds_name=$1
+    seeds_config=$2
+    shift 2
+    for seed in 0 1 2 3; do
+        run "$seeds_name-s$seed" "$seeds_config" "$@" --set "run.seed=$seed"
+        dirs="$dirs $out/$seeds_name-s$seed"
+    done
+}
 
 # Seeds 0 (synthetic) to 3.
 table_synthetic() {
@@ -38,11 +51,8 @@ table_synthetic() {
 # 10 tracking steps a frame, the map every second frame, a keyframe every second.
 table_synthetic_10hz() {
     dirs=
-    for seed in 0 1 2 3; do
-        run "synthetic-10hz-s$seed" "$room" --set data.stride=3 --set tracking.iterations=10 \
-            --set mapping.every=2 --set mapping.keyframe_every=10 --set "run.seed=$seed"
-        dirs="$dirs $out/synthetic-10hz-s$seed"
-    done
+    seeds synthetic-10hz "$room" --set data.stride=3 --set tracking.iterations=10 \
+        --set mapping.every=2 --set mapping.keyframe_every=10
     # shellcheck disable=SC2086
     table "Synthetic room at 10 Hz, simulated IMU, seeds 0–3 (configs/synthetic_imu.toml)" \
         "$metrics" $dirs
@@ -108,12 +118,8 @@ table_euroc() {
 table_readings() {
     dirs=
     for readings in 5 64; do
-        for seed in 0 1 2 3; do
-            name="euroc-tight-readings$readings-s$seed"
-            run "$name" "$euroc" --set "$euroc_data" --set 'slam.methods=["prev_tight"]' \
-                --set "imu.max_readings=$readings" --set "run.seed=$seed"
-            dirs="$dirs $out/$name"
-        done
+        seeds "euroc-tight-readings$readings" "$euroc" --set "$euroc_data" \
+            --set 'slam.methods=["prev_tight"]' --set "imu.max_readings=$readings"
     done
     # shellcheck disable=SC2086
     table "prev_tight at 10 Hz with 5 readings a step and with all 20 (imu.max_readings)" \
@@ -124,13 +130,8 @@ table_readings() {
 # seeds 0 to 3 (the euroc table is the same without it).
 table_bias_refine() {
     dirs=
-    for seed in 0 1 2 3; do
-        name="euroc-bias-refine-s$seed"
-        run "$name" "$euroc" --set "$euroc_data" --set imu.bias_refine=true \
-            --set 'slam.methods=["prev_loose","prev_tight","prev_accel","prev_combined"]' \
-            --set "run.seed=$seed"
-        dirs="$dirs $out/$name"
-    done
+    seeds euroc-bias-refine "$euroc" --set "$euroc_data" --set imu.bias_refine=true \
+        --set "$relative_imu"
     # shellcheck disable=SC2086
     table "The gyroscope's bias refined online at 10 Hz (imu.bias_refine = true)" \
         "$metrics,gyro_bias_err_rad_s,gyro_bias_start_err_rad_s" $dirs
@@ -140,10 +141,7 @@ table_bias_refine() {
 # table is the same without it).
 table_bias_refine_room() {
     dirs=
-    for seed in 0 1 2 3; do
-        run "synthetic-bias-refine-s$seed" "$room" --set imu.bias_refine=true --set "run.seed=$seed"
-        dirs="$dirs $out/synthetic-bias-refine-s$seed"
-    done
+    seeds synthetic-bias-refine "$room" --set imu.bias_refine=true
     # shellcheck disable=SC2086
     table "The gyroscope's bias refined online on the synthetic room (imu.bias_refine = true)" \
         "$metrics,gyro_bias_err_rad_s,gyro_bias_start_err_rad_s" $dirs
@@ -153,14 +151,8 @@ table_bias_refine_room() {
 # removed (euroc.bias = "ground_truth", not refined), seeds 0 to 3.
 table_bias_truth() {
     dirs=
-    for seed in 0 1 2 3; do
-        name="euroc-bias-truth-s$seed"
-        run "$name" "$euroc" --set "$euroc_data" --set 'euroc.bias="ground_truth"' \
-            --set imu.bias_refine=false \
-            --set 'slam.methods=["prev_loose","prev_tight","prev_accel","prev_combined"]' \
-            --set "run.seed=$seed"
-        dirs="$dirs $out/$name"
-    done
+    seeds euroc-bias-truth "$euroc" --set "$euroc_data" --set 'euroc.bias="ground_truth"' \
+        --set imu.bias_refine=false --set "$relative_imu"
     # shellcheck disable=SC2086
     table "The ground truth's bias at 10 Hz (euroc.bias = \"ground_truth\"): the control" \
         "$metrics" $dirs
