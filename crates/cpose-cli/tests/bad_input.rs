@@ -643,6 +643,34 @@ fn euroc(dir: &Path) {
     );
 }
 
+/// [`euroc`] with the IMU readings given as `(timestamp offset in 5-ms steps, w_x)`: the rest of
+/// each reading is at rest.
+fn euroc_imu(dir: &Path, readings: impl Iterator<Item = (i64, f64)>) {
+    euroc(dir);
+    let t0: i64 = 1_403_715_523_912_140_000;
+    let mut imu = String::from("#timestamp,w_x,w_y,w_z,a_x,a_y,a_z\n");
+    for (i, w) in readings {
+        imu.push_str(&format!("{},{w},0,0,0,0,9.81\n", t0 + i * 5_000_000));
+    }
+    write(dir, "mav0/imu0/data.csv", imu);
+}
+
+/// [`euroc`] with a turning IMU from the first reading: no stationary start.
+fn euroc_moving(dir: &Path) {
+    euroc_imu(
+        dir,
+        (0..200).map(|i| (i, if i % 2 == 0 { 0.5 } else { -0.5 })),
+    );
+}
+
+/// [`euroc`] with no IMU readings from 0.1 s to 0.2 s, between the frames.
+fn euroc_gap(dir: &Path) {
+    euroc_imu(
+        dir,
+        (0..200).filter(|i| !(20..40).contains(i)).map(|i| (i, 0.0)),
+    );
+}
+
 const INTRINSICS: &str = "100 0 173 0\n0 100 130 0\n0 0 1 0\n0 0 0 1\n";
 
 /// EventNeRF: 3 views in `train/` (pose, intrinsics), four events in `train/events/`.
@@ -4442,6 +4470,20 @@ fn euroc_folders() {
             args: RUN_X,
             code: 1,
             expect: &["seq: the ground truth and the IMU need at least two entries each"],
+        },
+        Case {
+            name: "slam_imu: no stationary start for the bias estimate",
+            files: &[IMU_EUROC, ("seq", S(euroc_moving))],
+            args: RUN_X,
+            code: 1,
+            expect: &["bias = \"estimate\" needs the recording to start at rest"],
+        },
+        Case {
+            name: "slam_imu: a gap in the IMU readings",
+            files: &[IMU_EUROC, ("seq", S(euroc_gap))],
+            args: &["run", "x.toml", "--set", "euroc.bias=\"raw\""],
+            code: 1,
+            expect: &["the IMU readings have a gap of"],
         },
     ];
     check_all("euroc", &cases);
