@@ -613,10 +613,13 @@ fn tum_rgbd(dir: &Path) {
 
 const SENSOR_YAML: &str = "%YAML:1.0\nsensor_type: imu\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0,\n         0.0, 1.0, 0.0, 0.0,\n         0.0, 0.0, 1.0, 0.0,\n         0.0, 0.0, 0.0, 1.0]\nrate_hz: 200\ngyroscope_noise_density: 1.6968e-04\ngyroscope_random_walk: 1.9393e-05\naccelerometer_noise_density: 2.0000e-3\naccelerometer_random_walk: 3.0000e-3\n";
 
+/// The first timestamp (ns) of the EuRoC folders of [`euroc`].
+const EUROC_T0: i64 = 1_403_715_523_912_140_000;
+
 /// EuRoC (ASL): `mav0/` with 100 ground-truth states and 200 IMU readings over 1 s, and both
 /// `sensor.yaml`.
 fn euroc(dir: &Path) {
-    let t0: i64 = 1_403_715_523_912_140_000;
+    let t0 = EUROC_T0;
     let mut gt = String::from(
         "#timestamp,p_x,p_y,p_z,q_w,q_x,q_y,q_z,v_x,v_y,v_z,bw_x,bw_y,bw_z,ba_x,ba_y,ba_z\n",
     );
@@ -643,14 +646,12 @@ fn euroc(dir: &Path) {
     );
 }
 
-/// [`euroc`] with the IMU readings given as `(timestamp offset in 5-ms steps, w_x)`: the rest of
-/// each reading is at rest.
+/// [`euroc`] with the IMU readings `(k, w_x)` at `k` × 5 ms, the other axes at rest.
 fn euroc_imu(dir: &Path, readings: impl Iterator<Item = (i64, f64)>) {
     euroc(dir);
-    let t0: i64 = 1_403_715_523_912_140_000;
     let mut imu = String::from("#timestamp,w_x,w_y,w_z,a_x,a_y,a_z\n");
     for (i, w) in readings {
-        imu.push_str(&format!("{},{w},0,0,0,0,9.81\n", t0 + i * 5_000_000));
+        imu.push_str(&format!("{},{w},0,0,0,0,9.81\n", EUROC_T0 + i * 5_000_000));
     }
     write(dir, "mav0/imu0/data.csv", imu);
 }
