@@ -31,7 +31,7 @@ use cpose_slam::task::{
     BoundsConfig, DataConfig, MeshConfig, ModelFactory, SlamConfig, SlamSetup, Source,
     ensure_generated, frame_range, open_sequence, run_methods,
 };
-use cpose_slam::track::{FreePose, PoseModel, PoseNetTrackConfig, PoseNetTracker, Reference};
+use cpose_slam::track::{FreePose, PoseModel, PoseNetTrackConfig};
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -504,15 +504,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                 Method::Baseline => {
                     Box::new(move || Ok(Box::new(FreePose::new(lr, factor)) as Box<dyn PoseModel>))
                 }
-                Method::Prev => Box::new(move || {
-                    Ok(Box::new(PoseNetTracker::new(
-                        posenet,
-                        Reference::Previous,
-                        range,
-                        seed,
-                    )?) as _)
-                }),
-                Method::PrevLoose
+                Method::Prev
+                | Method::PrevLoose
                 | Method::PrevTight
                 | Method::PrevAccel
                 | Method::PrevCombined => {
@@ -520,7 +513,8 @@ fn run(input: &TaskInput) -> anyhow::Result<()> {
                         Method::PrevTight => ImuMode::Tight,
                         Method::PrevAccel => ImuMode::Accel,
                         Method::PrevCombined => ImuMode::Combined,
-                        _ => ImuMode::Loose,
+                        Method::PrevLoose => ImuMode::Loose,
+                        _ => ImuMode::None,
                     };
                     Box::new(move || {
                         Ok(Box::new(
