@@ -160,12 +160,14 @@ table_bias_truth() {
 
 # The relative family without the accelerometer started at the last interval's velocity
 # (imu.velocity_start = true), seeds 0 to 3: the room at 10 Hz as table synthetic_10hz, the flight
-# at 5 Hz as table euroc_5hz.
+# at 10 Hz as table euroc and at 5 Hz as table euroc_5hz.
 table_velocity_start() {
     dirs=
     velocity='slam.methods=["prev","prev_loose","prev_tight"]'
     seeds synthetic-10hz-velocity "$room" --set data.stride=3 --set tracking.iterations=10 \
         --set mapping.every=2 --set mapping.keyframe_every=10 --set "$velocity" \
+        --set imu.velocity_start=true
+    seeds euroc-velocity "$euroc" --set "$euroc_data" --set "$velocity" \
         --set imu.velocity_start=true
     seeds euroc-5hz-velocity "$euroc" --set "$euroc_data" --set data.stride=2 \
         --set tracking.iterations=80 --set "$velocity" --set imu.velocity_start=true
