@@ -96,7 +96,10 @@ pub struct ImuTrackConfig {
     pub velocity_secs: f64,
     /// The relative family's start without the accelerometer (`prev`, `prev_loose`,
     /// `prev_tight`) moves at the velocity of the last frame interval. Off, the network's
-    /// extrapolation alone moves its position.
+    /// extrapolation alone moves its position. Off by default: on the room at 10 Hz it brings the
+    /// gyroscope's methods from 24–38 cm to 1.3–2.3 cm, but on the flight at 5 Hz it loses
+    /// `prev_tight` in two seeds of four, a lost frame's start carrying the drift on
+    /// (`docs/results/imu.md`, table `velocity_start`).
     pub velocity_start: bool,
     /// At most this many readings per step of the tight terms, evenly spread over the interval.
     /// Each reading costs the network and its time derivative, forward and backward, on every
@@ -692,9 +695,10 @@ impl PoseModel for ImuPoseNet {
 /// moved by the IMU's motion over the interval, `T_i = T_{i−1} ∘ P_i ∘ N(t_i)`
 /// ([`PoseNetTracker::set_prediction`]): `P_i` turns by the gyroscope's rotation and, with the
 /// accelerometer, moves by its displacement ([`accelerometer_start`], the velocity fitted to
-/// the estimates of the latest `imu.velocity_secs`). The frame starts there, and the network
-/// holds only what the prediction misses — its extrapolation carries the IMU's slowly varying
-/// errors (bias) forward. By `mode`:
+/// the estimates of the latest `imu.velocity_secs`); without it and with `imu.velocity_start`,
+/// by the last interval's velocity (also for `none`, `prev`, whose rotation stays the network's).
+/// The frame starts there, and the network holds only what the prediction misses — its
+/// extrapolation carries the IMU's slowly varying errors (bias) forward. By `mode`:
 /// - `loose`: the gyroscope's rotation ties the frame's (`N`'s rotation to the identity; a
 ///   [`MotionIncrement`], weight `λ_g P`).
 /// - `tight`: the paper's `q̇ = ½ q ⊗ (0, ω)` on `N` as a function of time
