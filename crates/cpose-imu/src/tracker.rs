@@ -1396,6 +1396,12 @@ mod tests {
             );
             e
         };
+        // Without IMU and without the velocity start, the relative tracker is task slam's `prev`.
+        let mut prev = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
+        assert_eq!(
+            errors(ImuMode::None, false),
+            start_errors(&mut prev, &flight)
+        );
         // Measured: the position 5.0 (none) and 4.8 cm (loose, tight) off without, 2.0 cm with;
         // the rotations unchanged (1.79°, 0.03°, 0.05°); combined 0.35 cm either way.
         for mode in [ImuMode::None, ImuMode::Loose, ImuMode::Tight] {
