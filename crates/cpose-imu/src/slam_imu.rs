@@ -1,6 +1,7 @@
 //! Task `slam_imu`: RGB-D neural SLAM with an IMU (paper §3.4, its EuRoC table and the
 //! supplement's IMU tables). Methods: NICE-SLAM's free pose (`baseline`), PoseNet relative to the
-//! previous camera without IMU (`prev`, task `slam`'s) and started from the IMU's motion over
+//! previous camera without IMU (`prev`, task `slam`'s; with `imu.velocity_start` its position
+//! starts at the last interval's velocity) and started from the IMU's motion over
 //! each frame interval (`prev_loose`, `prev_tight`, `prev_accel`, `prev_combined`;
 //! [`crate::tracker::RelativeImu`], the primary family), and the experimental absolute PoseNet
 //! with the IMU in tracking ([`crate::tracker::ImuPoseNet`]) as `none`, `loose`, `tight`,
