@@ -1202,6 +1202,26 @@ mod tests {
         start_errors(&mut model, flight)
     }
 
+    /// [`start_errors`] of the relative tracker with `mode` and `imu_config` on `flight`.
+    fn relative_errors(mode: ImuMode, imu_config: &ImuTrackConfig, flight: &Flight) -> (f64, f64) {
+        let (times, _, imu) = flight;
+        let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
+        let mut model = RelativeImu::new(
+            &PoseNetTrackConfig::default(),
+            imu_config,
+            mode,
+            imu.clone(),
+            gravity_world(),
+            times.clone(),
+            400,
+            range,
+            0,
+            0.0,
+        )
+        .unwrap();
+        start_errors(&mut model, flight)
+    }
+
     /// Mean rotation (degrees) and translation (metres) error of the start pose of every frame
     /// when each earlier frame was tracked perfectly.
     fn start_errors(model: &mut dyn PoseModel, (times, poses, _): &Flight) -> (f64, f64) {
@@ -1312,27 +1332,14 @@ mod tests {
             eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
             return;
         };
-        let (times, _, imu) = &flight;
+        let times = &flight.0;
         let config = PoseNetTrackConfig::default();
         let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
         let imu_config = ImuTrackConfig::default();
         let mut prev = PoseNetTracker::new(&config, Reference::Previous, range, 0).unwrap();
         let without = start_errors(&mut prev, &flight);
         let errors = |mode| {
-            let mut model = RelativeImu::new(
-                &config,
-                &imu_config,
-                mode,
-                imu.clone(),
-                gravity_world(),
-                times.clone(),
-                400,
-                range,
-                0,
-                0.0,
-            )
-            .unwrap();
-            let e = start_errors(&mut model, &flight);
+            let e = relative_errors(mode, &imu_config, &flight);
             eprintln!(
                 "{mode:?}: {:.3}°, {:.4} m (prev: {:.3}°, {:.4} m)",
                 e.0, e.1, without.0, without.1
@@ -1368,7 +1375,7 @@ mod tests {
             eprintln!("skipped: shared data folder not found (set CPOSE_DATA_DIR)");
             return;
         };
-        let (times, _, imu) = &flight;
+        let times = &flight.0;
         let config = PoseNetTrackConfig::default();
         let range = TimeRange::new(times[0], times[times.len() - 1]).unwrap();
         let errors = |mode, velocity_start| {
@@ -1376,20 +1383,7 @@ mod tests {
                 velocity_start,
                 ..ImuTrackConfig::default()
             };
-            let mut model = RelativeImu::new(
-                &config,
-                &imu_config,
-                mode,
-                imu.clone(),
-                gravity_world(),
-                times.clone(),
-                400,
-                range,
-                0,
-                0.0,
-            )
-            .unwrap();
-            let e = start_errors(&mut model, &flight);
+            let e = relative_errors(mode, &imu_config, &flight);
             eprintln!(
                 "{mode:?}, velocity start {velocity_start}: {:.3}°, {:.4} m",
                 e.0, e.1
